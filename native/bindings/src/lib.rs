@@ -1,0 +1,192 @@
+//! The Python module `hemishadow._native`: converts arrays, releases the GIL while the engine
+//! works, and maps engine errors to ValueError and any panic to RuntimeError, so nothing the
+//! caller passes can take the interpreter (or Blender) down. Argument checks that need Python
+//! (dtypes, shapes) happen in the pure-Python layer; everything is checked again here.
+
+use std::panic::{catch_unwind, AssertUnwindSafe};
+
+use hemishadow_engine as engine;
+use numpy::ndarray::Array2;
+use numpy::{IntoPyArray, PyArray2, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3};
+use pyo3::exceptions::{PyRuntimeError, PyValueError};
+use pyo3::prelude::*;
+
+fn to_py_err(error: engine::Error) -> PyErr {
+    PyValueError::new_err(error.to_string())
+}
+
+/// Runs engine work without the GIL and with panics caught.
+fn run<T: Send>(py: Python<'_>, work: impl FnOnce() -> engine::Result<T> + Send) -> PyResult<T> {
+    py.detach(|| catch_unwind(AssertUnwindSafe(work)))
+        .map_err(|panic| {
+            let message = panic
+                .downcast_ref::<&str>()
+                .map(|s| s.to_string())
+                .or_else(|| panic.downcast_ref::<String>().cloned())
+                .unwrap_or_else(|| "unknown panic".into());
+            PyRuntimeError::new_err(format!("internal error in the hemishadow engine: {message}"))
+        })?
+        .map_err(to_py_err)
+}
+
+fn rows3(array: &PyReadonlyArray2<f32>, what: &str) -> PyResult<Vec<[f32; 3]>> {
+    let view = array.as_array();
+    if view.ncols() != 3 {
+        return Err(PyValueError::new_err(format!("{what} must have shape (N, 3), got {:?}", view.shape())));
+    }
+    Ok(view.rows().into_iter().map(|r| [r[0], r[1], r[2]]).collect())
+}
+
+fn triangles3(array: &PyReadonlyArray2<u32>) -> PyResult<Vec<[u32; 3]>> {
+    let view = array.as_array();
+    if view.ncols() != 3 {
+        return Err(PyValueError::new_err(format!("triangles must have shape (M, 3), got {:?}", view.shape())));
+    }
+    Ok(view.rows().into_iter().map(|r| [r[0], r[1], r[2]]).collect())
+}
+
+fn vec3(array: &PyReadonlyArray1<f32>, what: &str) -> PyResult<[f32; 3]> {
+    match array.as_slice()? {
+        [x, y, z] => Ok([*x, *y, *z]),
+        other => Err(PyValueError::new_err(format!("{what} must have 3 components, got {}", other.len()))),
+    }
+}
+
+fn matrix(rows: Vec<f32>, n: usize, k: usize, py: Python<'_>) -> Bound<'_, PyArray2<f32>> {
+    Array2::from_shape_vec((n, k), rows).expect("engine output has the promised shape").into_pyarray(py)
+}
+
+/// Real SH basis Y_i(d) of unit directions (N, 3): float32 (N, bands^2).
+#[pyfunction]
+fn sh_basis<'py>(py: Python<'py>, directions: PyReadonlyArray2<f32>, bands: usize) -> PyResult<Bound<'py, PyArray2<f32>>> {
+    let dirs = rows3(&directions, "directions")?;
+    let n = dirs.len();
+    let values = run(py, || {
+        let basis = engine::sh::ShBasis::new(bands)?;
+        let k = basis.coeffs();
+        let mut out = vec![0.0f32; n * k];
+        for (d, row) in dirs.iter().zip(out.chunks_mut(k)) {
+            basis.eval(*d, row);
+        }
+        Ok(out)
+    })?;
+    Ok(matrix(values, n, bands * bands, py))
+}
+
+/// Per-vertex transfer vectors; returns (transfer (N, bands^2), vertices without a normal).
+#[pyfunction]
+#[pyo3(signature = (vertices, triangles, normals, bands, exponent, view, views, offset, table_resolution))]
+#[allow(clippy::too_many_arguments)]
+fn transfer<'py>(
+    py: Python<'py>,
+    vertices: PyReadonlyArray2<f32>,
+    triangles: PyReadonlyArray2<u32>,
+    normals: Option<PyReadonlyArray2<f32>>,
+    bands: usize,
+    exponent: Option<f32>,
+    view: Option<PyReadonlyArray1<f32>>,
+    views: Option<PyReadonlyArray2<f32>>,
+    offset: Option<f32>,
+    table_resolution: usize,
+) -> PyResult<(Bound<'py, PyArray2<f32>>, usize)> {
+    let vertices = rows3(&vertices, "vertices")?;
+    let triangles = triangles3(&triangles)?;
+    let normals = normals.map(|n| rows3(&n, "normals")).transpose()?;
+    let view = match (view, views) {
+        (Some(v), _) => Some(engine::View::Direction(vec3(&v, "view")?)),
+        (None, Some(v)) => Some(engine::View::PerVertex(rows3(&v, "view")?)),
+        (None, None) => None,
+    };
+    let brdf = exponent.map_or(engine::Brdf::Diffuse, |exponent| engine::Brdf::Phong { exponent });
+    let settings = engine::Settings { bands, brdf, view, offset, table_resolution };
+    let n = vertices.len();
+    let output = run(py, || engine::transfer(&vertices, &triangles, normals.as_deref(), &settings))?;
+    Ok((matrix(output.transfer, n, output.coeffs, py), output.missing_normals))
+}
+
+/// SH lighting (bands^2, 3) of an equirectangular float image (H, W, 3 or 4), top row first.
+#[pyfunction]
+fn project_equirectangular<'py>(
+    py: Python<'py>,
+    image: PyReadonlyArray3<f32>,
+    bands: usize,
+    rotation: PyReadonlyArray2<f32>,
+) -> PyResult<Bound<'py, PyArray2<f32>>> {
+    let shape = image.as_array().shape().to_vec();
+    let pixels = image.as_slice()?.to_vec();
+    let r = rotation.as_array();
+    if r.shape() != [3, 3] {
+        return Err(PyValueError::new_err("rotation must be a 3x3 matrix"));
+    }
+    let rotation = [[r[[0, 0]], r[[0, 1]], r[[0, 2]]], [r[[1, 0]], r[[1, 1]], r[[1, 2]]], [r[[2, 0]], r[[2, 1]], r[[2, 2]]]];
+    let values = run(py, || {
+        let image = engine::environment::Image { pixels: &pixels, height: shape[0], width: shape[1], channels: shape[2] };
+        engine::environment::project(&image, bands, rotation)
+    })?;
+    Ok(matrix(values, bands * bands, 3, py))
+}
+
+fn mask_rows(mask: &engine::disk_mask::Mask) -> Vec<bool> {
+    let side = engine::disk_mask::MASK_SIDE;
+    (0..side * side).map(|i| mask.get(i / side, i % side)).collect()
+}
+
+fn mask_array<'py>(py: Python<'py>, mask: &engine::disk_mask::Mask) -> Bound<'py, PyArray2<bool>> {
+    let side = engine::disk_mask::MASK_SIDE;
+    Array2::from_shape_vec((side, side), mask_rows(mask)).expect("32x32").into_pyarray(py)
+}
+
+/// The rasterized mask (32, 32) of triangles (M, 9) given in a receiver's tangent frame.
+#[pyfunction]
+fn rasterize_local<'py>(py: Python<'py>, triangles: PyReadonlyArray2<f32>, table_resolution: usize) -> PyResult<Bound<'py, PyArray2<bool>>> {
+    let view = triangles.as_array();
+    if view.ncols() != 9 {
+        return Err(PyValueError::new_err("triangles must have shape (M, 3, 3)"));
+    }
+    if view.iter().any(|v| !v.is_finite()) {
+        return Err(PyValueError::new_err("triangles must be finite"));
+    }
+    let tris: Vec<[[f32; 3]; 3]> = view.rows().into_iter().map(|r| [[r[0], r[1], r[2]], [r[3], r[4], r[5]], [r[6], r[7], r[8]]]).collect();
+    let mask = run(py, || {
+        let table = engine::plane_table::PlaneTable::shared(table_resolution)?;
+        let mut mask = engine::disk_mask::Mask::EMPTY;
+        engine::rasterizer::rasterize(&table, &tris, &mut mask);
+        Ok(mask)
+    })?;
+    Ok(mask_array(py, &mask))
+}
+
+/// The visibility mask (32, 32) seen from `point` with `normal` over a world-space mesh.
+#[pyfunction]
+fn visibility_mask<'py>(
+    py: Python<'py>,
+    point: PyReadonlyArray1<f32>,
+    normal: PyReadonlyArray1<f32>,
+    vertices: PyReadonlyArray2<f32>,
+    triangles: PyReadonlyArray2<u32>,
+    table_resolution: usize,
+) -> PyResult<Bound<'py, PyArray2<bool>>> {
+    let (point, normal) = (vec3(&point, "point")?, vec3(&normal, "normal")?);
+    let (vertices, triangles) = (rows3(&vertices, "vertices")?, triangles3(&triangles)?);
+    let mask = run(py, || engine::transfer::visibility_mask(point, normal, &vertices, &triangles, table_resolution))?;
+    Ok(mask_array(py, &mask))
+}
+
+/// The cells (32, 32) that belong to the unit disk.
+#[pyfunction]
+fn disk_cells(py: Python<'_>) -> Bound<'_, PyArray2<bool>> {
+    mask_array(py, &engine::disk_mask::disk())
+}
+
+#[pymodule]
+fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(sh_basis, m)?)?;
+    m.add_function(wrap_pyfunction!(transfer, m)?)?;
+    m.add_function(wrap_pyfunction!(project_equirectangular, m)?)?;
+    m.add_function(wrap_pyfunction!(rasterize_local, m)?)?;
+    m.add_function(wrap_pyfunction!(visibility_mask, m)?)?;
+    m.add_function(wrap_pyfunction!(disk_cells, m)?)?;
+    m.add("DEFAULT_TABLE_RESOLUTION", engine::plane_table::DEFAULT_RESOLUTION)?;
+    m.add("MASK_SIDE", engine::disk_mask::MASK_SIDE)?;
+    Ok(())
+}

@@ -1,0 +1,28 @@
+//! The engine's one error type: every failure a caller can cause by its input.
+
+use std::fmt;
+
+/// Bad input, described so that the caller can fix it.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Error {
+    /// An argument has the wrong length, count or value; the message says which.
+    InvalidInput(String),
+}
+
+impl Error {
+    pub fn invalid(message: impl Into<String>) -> Self {
+        Error::InvalidInput(message.into())
+    }
+}
+
+impl fmt::Display for Error {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Error::InvalidInput(message) => f.write_str(message),
+        }
+    }
+}
+
+impl std::error::Error for Error {}
+
+pub type Result<T> = std::result::Result<T, Error>;

@@ -1,0 +1,22 @@
+//! hemishadow's engine: soft self-shadowing from environment lighting by hemispherical
+//! rasterization (Kautz, Lehtinen, Aila, "Hemispherical Rasterization for Self-Shadowing of
+//! Dynamic Objects", EGSR 2004). No Python here; `hemishadow-bindings` wraps it.
+//!
+//! Pipeline per receiver vertex: tangent frame -> blockers into the 32x32 disk mask
+//! (`rasterizer`, `plane_table`, `disk_mask`) -> integration against SH and the BRDF
+//! (`integrate`, `sh`) -> transfer vector (`transfer`). Lighting comes from `environment`.
+
+pub mod disk_mask;
+pub mod environment;
+pub mod error;
+pub mod integrate;
+pub mod mesh;
+pub mod plane_table;
+pub mod rasterizer;
+pub mod sh;
+pub mod sh_rotation;
+pub mod transfer;
+
+pub use error::{Error, Result};
+pub use integrate::Brdf;
+pub use transfer::{transfer, Output, Settings, View};

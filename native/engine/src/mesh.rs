@@ -1,0 +1,188 @@
+//! Mesh preparation: input checks, welding by position, vertex normals and tangent frames.
+//!
+//! Imported meshes are split at UV seams and hard edges (glTF's Fox is an unindexed triangle
+//! soup). Transfer is computed on the mesh welded by exact position, so splits never change
+//! the result and a receiver's own incident triangles are known.
+
+use std::collections::HashMap;
+
+use crate::error::{Error, Result};
+use crate::rasterizer::{cross, dot};
+
+pub type Vec3 = [f32; 3];
+
+/// A mesh welded by position, with the map from input vertices to welded ones.
+pub struct WeldedMesh {
+    pub positions: Vec<Vec3>,
+    /// Triangles over welded vertices; triangles that repeat a welded vertex are dropped.
+    pub triangles: Vec<[u32; 3]>,
+    /// Input vertex -> welded vertex.
+    pub remap: Vec<u32>,
+}
+
+fn check_finite(values: &[Vec3], what: &str) -> Result<()> {
+    match values.iter().position(|v| !v.iter().all(|c| c.is_finite())) {
+        Some(i) => Err(Error::invalid(format!("{what} {i} is not finite: {:?}", values[i]))),
+        None => Ok(()),
+    }
+}
+
+fn check_indices(triangles: &[[u32; 3]], vertex_count: usize) -> Result<()> {
+    for (t, tri) in triangles.iter().enumerate() {
+        if let Some(&i) = tri.iter().find(|&&i| i as usize >= vertex_count) {
+            return Err(Error::invalid(format!(
+                "triangle {t} uses vertex index {i}, but the mesh has {vertex_count} vertices"
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// Checks the input and welds vertices that share a position exactly (+0.0 and -0.0 alike).
+pub fn weld(vertices: &[Vec3], triangles: &[[u32; 3]]) -> Result<WeldedMesh> {
+    if vertices.is_empty() {
+        return Err(Error::invalid("the mesh has no vertices"));
+    }
+    if triangles.is_empty() {
+        return Err(Error::invalid("the mesh has no triangles"));
+    }
+    check_finite(vertices, "vertex")?;
+    check_indices(triangles, vertices.len())?;
+    let key = |v: &Vec3| v.map(|c| (c + 0.0).to_bits()); // + 0.0 turns -0.0 into +0.0
+    let mut first_of: HashMap<[u32; 3], u32> = HashMap::with_capacity(vertices.len());
+    let mut positions = Vec::new();
+    let remap: Vec<u32> = vertices
+        .iter()
+        .map(|v| {
+            *first_of.entry(key(v)).or_insert_with(|| {
+                positions.push(*v);
+                (positions.len() - 1) as u32
+            })
+        })
+        .collect();
+    let triangles = triangles
+        .iter()
+        .map(|t| t.map(|i| remap[i as usize]))
+        .filter(|[a, b, c]| a != b && b != c && c != a)
+        .collect();
+    Ok(WeldedMesh { positions, triangles, remap })
+}
+
+#[inline]
+pub fn normalize(v: Vec3) -> Option<Vec3> {
+    let len = dot(v, v).sqrt();
+    (len > 1e-20 && len.is_finite()).then(|| v.map(|c| c / len))
+}
+
+/// Area-weighted normals of the welded mesh (zero where no triangle touches a vertex).
+pub fn area_normals(mesh: &WeldedMesh) -> Vec<Vec3> {
+    let mut sums = vec![[0.0f32; 3]; mesh.positions.len()];
+    for tri in &mesh.triangles {
+        let [a, b, c] = tri.map(|i| mesh.positions[i as usize]);
+        let face = cross(sub(b, a), sub(c, a)); // length = twice the area
+        for &i in tri {
+            let s = &mut sums[i as usize];
+            *s = add(*s, face);
+        }
+    }
+    sums.into_iter().map(|s| normalize(s).unwrap_or([0.0; 3])).collect()
+}
+
+/// Normals per welded vertex: the normalised mean of the given normals of its copies, or the
+/// area-weighted normal where none are given or they cancel. A zero normal marks a vertex
+/// that no triangle touches and that has no usable given normal.
+pub fn welded_normals(mesh: &WeldedMesh, given: Option<&[Vec3]>) -> Result<Vec<Vec3>> {
+    let area = area_normals(mesh);
+    let Some(given) = given else { return Ok(area) };
+    if given.len() != mesh.remap.len() {
+        return Err(Error::invalid(format!(
+            "normals has {} rows but vertices has {}",
+            given.len(),
+            mesh.remap.len()
+        )));
+    }
+    check_finite(given, "normal")?;
+    let mut sums = vec![[0.0f32; 3]; mesh.positions.len()];
+    for (n, &w) in given.iter().zip(&mesh.remap) {
+        if let Some(unit) = normalize(*n) {
+            sums[w as usize] = add(sums[w as usize], unit);
+        }
+    }
+    Ok(sums.into_iter().zip(area).map(|(s, a)| normalize(s).unwrap_or(a)).collect())
+}
+
+/// Mean edge length of the welded mesh, the scale of the default self-occlusion offset.
+pub fn mean_edge_length(mesh: &WeldedMesh) -> f32 {
+    let mut total = 0.0f64;
+    for tri in &mesh.triangles {
+        let [a, b, c] = tri.map(|i| mesh.positions[i as usize]);
+        total += (length(sub(b, a)) + length(sub(c, b)) + length(sub(a, c))) as f64;
+    }
+    (total / (3 * mesh.triangles.len().max(1)) as f64) as f32
+}
+
+/// Tangent and bitangent completing a unit normal to a right-handed frame
+/// (Duff et al., "Building an orthonormal basis, revisited", 2017).
+#[inline]
+pub fn tangent_frame(n: Vec3) -> (Vec3, Vec3) {
+    let sign = 1.0f32.copysign(n[2]);
+    let a = -1.0 / (sign + n[2]);
+    let b = n[0] * n[1] * a;
+    (
+        [1.0 + sign * n[0] * n[0] * a, sign * b, -sign * n[0]],
+        [b, sign + n[1] * n[1] * a, -n[1]],
+    )
+}
+
+#[inline(always)]
+pub fn sub(a: Vec3, b: Vec3) -> Vec3 {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+#[inline(always)]
+pub fn add(a: Vec3, b: Vec3) -> Vec3 {
+    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
+}
+
+#[inline(always)]
+pub fn length(a: Vec3) -> f32 {
+    dot(a, a).sqrt()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn weld_merges_split_seams() {
+        let vertices = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [-0.0, 0.0, 0.0], [1.0, 1.0, 0.0]];
+        let mesh = weld(&vertices, &[[0, 1, 2], [3, 4, 2]]).unwrap();
+        assert_eq!(mesh.positions.len(), 4);
+        assert_eq!(mesh.remap[3], mesh.remap[0]);
+    }
+
+    #[test]
+    fn weld_drops_index_degenerate_triangles() {
+        let vertices = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 0.0, 0.0]];
+        let mesh = weld(&vertices, &[[0, 1, 2]]).unwrap();
+        assert!(mesh.triangles.is_empty());
+    }
+
+    #[test]
+    fn weld_rejects_bad_input() {
+        assert!(weld(&[], &[[0, 0, 0]]).is_err());
+        assert!(weld(&[[0.0; 3]], &[]).is_err());
+        assert!(weld(&[[0.0; 3]], &[[0, 0, 1]]).is_err());
+        assert!(weld(&[[f32::NAN, 0.0, 0.0]], &[[0, 0, 0]]).is_err());
+    }
+
+    #[test]
+    fn tangent_frame_is_orthonormal() {
+        for n in [[0.0, 0.0, 1.0], [0.0, 0.0, -1.0], [0.6, 0.0, 0.8], [0.0, -0.6, -0.8]] {
+            let (t, b) = tangent_frame(n);
+            assert!(dot(t, b).abs() < 1e-6 && dot(t, n).abs() < 1e-6 && dot(b, n).abs() < 1e-6);
+            let c = cross(t, b);
+            assert!((c[0] - n[0]).abs() < 1e-6 && (c[1] - n[1]).abs() < 1e-6 && (c[2] - n[2]).abs() < 1e-6);
+        }
+    }
+}

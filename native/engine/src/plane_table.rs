@@ -1,0 +1,152 @@
+//! The look-up table of half-space masks (Kautz et al. 2004, section 3.1.1).
+//!
+//! A plane through the receiver is given by its normal m; its mask has the in-disk cells whose
+//! centre direction d satisfies m.d >= 0. Normals are quantised by a cube map of
+//! 6 x R x R texels (the paper's R = 128 gives 12 MiB); each texel stores the mask of the plane
+//! through its centre direction. Tables are built once per resolution and shared by all threads.
+
+use std::sync::{Arc, Mutex};
+
+use rayon::prelude::*;
+
+use crate::disk_mask::{cell_direction, Mask, MASK_SIDE};
+use crate::error::{Error, Result};
+
+/// The paper's resolution: 6 x 128 x 128 texels.
+pub const DEFAULT_RESOLUTION: usize = 128;
+
+pub struct PlaneTable {
+    resolution: usize,
+    masks: Vec<Mask>,
+}
+
+/// Cube-map face and texel of a direction; the major axis picks the face.
+#[inline(always)]
+fn texel_of(m: [f32; 3], resolution: usize) -> usize {
+    let [x, y, z] = m;
+    let (ax, ay, az) = (x.abs(), y.abs(), z.abs());
+    let (face, u, v, major) = if ax >= ay && ax >= az {
+        ((x < 0.0) as usize, y, z, ax)
+    } else if ay >= az {
+        (2 + (y < 0.0) as usize, x, z, ay)
+    } else {
+        (4 + (z < 0.0) as usize, x, y, az)
+    };
+    let half = 0.5 * resolution as f32;
+    let scale = half / major;
+    // Float-to-int casts saturate, so a zero or NaN normal still lands inside the table.
+    let i = ((u * scale + half) as usize).min(resolution - 1);
+    let j = ((v * scale + half) as usize).min(resolution - 1);
+    (face * resolution + j) * resolution + i
+}
+
+/// Centre direction (not normalised) of a texel.
+fn texel_direction(face: usize, i: usize, j: usize, resolution: usize) -> [f32; 3] {
+    let u = -1.0 + (i as f32 + 0.5) * 2.0 / resolution as f32;
+    let v = -1.0 + (j as f32 + 0.5) * 2.0 / resolution as f32;
+    let sign = if face % 2 == 0 { 1.0 } else { -1.0 };
+    match face / 2 {
+        0 => [sign, u, v],
+        1 => [u, sign, v],
+        _ => [u, v, sign],
+    }
+}
+
+fn half_space_mask(m: [f32; 3], cells: &[(usize, usize, [f32; 3])]) -> Mask {
+    let mut mask = Mask::EMPTY;
+    for &(row, col, d) in cells {
+        if m[0] * d[0] + m[1] * d[1] + m[2] * d[2] >= 0.0 {
+            mask.set(row, col);
+        }
+    }
+    mask
+}
+
+impl PlaneTable {
+    pub fn build(resolution: usize) -> Result<Self> {
+        if !(4..=512).contains(&resolution) {
+            return Err(Error::invalid(format!(
+                "plane table resolution must be between 4 and 512, got {resolution}"
+            )));
+        }
+        let cells: Vec<(usize, usize, [f32; 3])> = (0..MASK_SIDE)
+            .flat_map(|row| (0..MASK_SIDE).map(move |col| (row, col)))
+            .filter_map(|(row, col)| cell_direction(row, col).map(|d| (row, col, d)))
+            .collect();
+        let masks = (0..6 * resolution * resolution)
+            .into_par_iter()
+            .map(|index| {
+                let (face, rest) = (index / (resolution * resolution), index % (resolution * resolution));
+                let (j, i) = (rest / resolution, rest % resolution);
+                half_space_mask(texel_direction(face, i, j, resolution), &cells)
+            })
+            .collect();
+        Ok(PlaneTable { resolution, masks })
+    }
+
+    /// The shared table of a resolution, built on first use.
+    pub fn shared(resolution: usize) -> Result<Arc<PlaneTable>> {
+        static TABLES: Mutex<Vec<Arc<PlaneTable>>> = Mutex::new(Vec::new());
+        let mut tables = TABLES.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+        if let Some(table) = tables.iter().find(|t| t.resolution == resolution) {
+            return Ok(table.clone());
+        }
+        let table = Arc::new(PlaneTable::build(resolution)?);
+        tables.push(table.clone());
+        Ok(table)
+    }
+
+    pub fn resolution(&self) -> usize {
+        self.resolution
+    }
+
+    pub fn bytes(&self) -> usize {
+        self.masks.len() * std::mem::size_of::<Mask>()
+    }
+
+    /// Mask of the cells on the positive side of the plane through the origin with normal m.
+    #[inline(always)]
+    pub fn lookup(&self, m: [f32; 3]) -> &Mask {
+        // SAFETY-free: texel_of always returns an index below 6 * resolution^2.
+        &self.masks[texel_of(m, self.resolution)]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::disk_mask::disk;
+
+    #[test]
+    fn default_table_is_twelve_mebibytes() {
+        let table = PlaneTable::shared(DEFAULT_RESOLUTION).unwrap();
+        assert_eq!(table.bytes(), 12 * 1024 * 1024);
+    }
+
+    #[test]
+    fn up_facing_plane_keeps_the_whole_disk() {
+        let table = PlaneTable::shared(32).unwrap();
+        assert_eq!(*table.lookup([0.0, 0.0, 1.0]), disk());
+        assert_eq!(*table.lookup([0.0, 0.0, -1.0]), Mask::EMPTY);
+    }
+
+    #[test]
+    fn degenerate_normals_do_not_panic() {
+        let table = PlaneTable::shared(16).unwrap();
+        let _ = table.lookup([0.0, 0.0, 0.0]);
+        let _ = table.lookup([f32::NAN, 1.0, f32::INFINITY]);
+    }
+
+    #[test]
+    fn every_texel_is_reachable_from_its_centre() {
+        let resolution = 8;
+        for face in 0..6 {
+            for j in 0..resolution {
+                for i in 0..resolution {
+                    let d = texel_direction(face, i, j, resolution);
+                    assert_eq!(texel_of(d, resolution), (face * resolution + j) * resolution + i);
+                }
+            }
+        }
+    }
+}

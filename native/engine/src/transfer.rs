@@ -1,0 +1,201 @@
+//! Per-vertex transfer vectors of a whole mesh, every triangle a potential blocker
+//! (Kautz et al. 2004, section 3: "for each vertex, we clear the visibility mask and
+//! rasterize all blocking triangles into it").
+
+use rayon::prelude::*;
+
+use crate::disk_mask::{disk, Mask};
+use crate::error::{Error, Result};
+use crate::integrate::{Brdf, Frame, Quadrature};
+use crate::mesh::{mean_edge_length, normalize, tangent_frame, weld, welded_normals, Vec3, WeldedMesh};
+use crate::plane_table::{PlaneTable, DEFAULT_RESOLUTION};
+use crate::rasterizer::{dot, triangle_mask};
+use crate::sh::ShBasis;
+
+/// Where glossy receivers are seen from.
+#[derive(Clone, Debug, PartialEq)]
+pub enum View {
+    /// One direction (towards the viewer) for every vertex.
+    Direction(Vec3),
+    /// One direction per input vertex.
+    PerVertex(Vec<Vec3>),
+}
+
+#[derive(Clone, Debug)]
+pub struct Settings {
+    pub bands: usize,
+    pub brdf: Brdf,
+    pub view: Option<View>,
+    /// Receivers sit this far along their normal; None: 1e-3 x the mean edge length.
+    pub offset: Option<f32>,
+    /// Plane-table cube-map resolution (6 x R x R texels).
+    pub table_resolution: usize,
+}
+
+impl Default for Settings {
+    fn default() -> Self {
+        Settings { bands: 5, brdf: Brdf::Diffuse, view: None, offset: None, table_resolution: DEFAULT_RESOLUTION }
+    }
+}
+
+/// Quadrature block size: the paper's 4 x 4 for diffuse; glossy lobes need finer sampling.
+pub fn block_size(brdf: Brdf) -> usize {
+    match brdf {
+        Brdf::Diffuse => 4,
+        Brdf::Phong { .. } => 2,
+    }
+}
+
+/// Transfer vectors, `bands^2` per input vertex, row-major. Vertices that no triangle touches
+/// and that have no usable normal get zeros; `Output::missing_normals` counts them.
+pub struct Output {
+    pub coeffs: usize,
+    pub transfer: Vec<f32>,
+    pub missing_normals: usize,
+}
+
+/// Everything a receiver needs, shared by all threads.
+struct Scene<'a> {
+    mesh: &'a WeldedMesh,
+    normals: &'a [Vec3],
+    views: Option<Vec<Vec3>>,
+    offset: f32,
+    brdf: Brdf,
+    table: &'a PlaneTable,
+    quadrature: Quadrature,
+    disk: Mask,
+}
+
+pub fn transfer(vertices: &[Vec3], triangles: &[[u32; 3]], normals: Option<&[Vec3]>, settings: &Settings) -> Result<Output> {
+    let basis = ShBasis::new(settings.bands)?;
+    check_brdf(settings.brdf)?;
+    let mesh = weld(vertices, triangles)?;
+    let normals = welded_normals(&mesh, normals)?;
+    let views = welded_views(&mesh, settings)?;
+    let offset = match settings.offset {
+        Some(o) if o.is_finite() && o >= 0.0 => o,
+        Some(o) => return Err(Error::invalid(format!("offset must be a finite, non-negative distance, got {o}"))),
+        None => 1e-3 * mean_edge_length(&mesh),
+    };
+    let table = PlaneTable::shared(settings.table_resolution)?;
+    let scene = Scene {
+        mesh: &mesh,
+        normals: &normals,
+        views,
+        offset,
+        brdf: settings.brdf,
+        table: &table,
+        quadrature: Quadrature::new(block_size(settings.brdf), basis),
+        disk: disk(),
+    };
+    let k = scene.quadrature.basis().coeffs();
+    let mut welded = vec![0.0f32; mesh.positions.len() * k];
+    welded
+        .par_chunks_mut(k)
+        .enumerate()
+        .for_each_init(|| vec![[0.0f32; 3]; mesh.positions.len()], |local, (r, out)| scene.receiver(r, local, out));
+    let transfer = mesh.remap.iter().flat_map(|&w| welded[w as usize * k..(w as usize + 1) * k].iter().copied()).collect();
+    let missing_normals = mesh.remap.iter().filter(|&&w| normals[w as usize] == [0.0; 3]).count();
+    Ok(Output { coeffs: k, transfer, missing_normals })
+}
+
+fn check_brdf(brdf: Brdf) -> Result<()> {
+    match brdf {
+        Brdf::Phong { exponent } if !(exponent.is_finite() && exponent >= 0.0) => {
+            Err(Error::invalid(format!("the Phong exponent must be finite and non-negative, got {exponent}")))
+        }
+        _ => Ok(()),
+    }
+}
+
+/// Unit view direction per welded vertex (the first copy's), for glossy BRDFs.
+fn welded_views(mesh: &WeldedMesh, settings: &Settings) -> Result<Option<Vec<Vec3>>> {
+    let unit = |v: Vec3, what: String| normalize(v).ok_or_else(|| Error::invalid(format!("{what} must be a finite, non-zero direction, got {v:?}")));
+    match (&settings.brdf, &settings.view) {
+        (Brdf::Diffuse, _) => Ok(None),
+        (Brdf::Phong { .. }, None) => Err(Error::invalid("a glossy BRDF needs a view direction")),
+        (_, Some(View::Direction(v))) => Ok(Some(vec![unit(*v, "view".into())?; mesh.positions.len()])),
+        (_, Some(View::PerVertex(views))) => {
+            if views.len() != mesh.remap.len() {
+                return Err(Error::invalid(format!("view has {} rows but vertices has {}", views.len(), mesh.remap.len())));
+            }
+            let mut welded = vec![None; mesh.positions.len()];
+            for (i, (&w, v)) in mesh.remap.iter().zip(views).enumerate() {
+                if welded[w as usize].is_none() {
+                    welded[w as usize] = Some(unit(*v, format!("view {i}"))?);
+                }
+            }
+            Ok(Some(welded.into_iter().map(|v| v.unwrap_or([0.0, 0.0, 1.0])).collect()))
+        }
+    }
+}
+
+impl Scene<'_> {
+    /// Transfer of welded vertex `r`; `local` is scratch for the mesh in its tangent frame.
+    fn receiver(&self, r: usize, local: &mut [Vec3], out: &mut [f32]) {
+        let n = self.normals[r];
+        if n == [0.0; 3] {
+            out.fill(0.0);
+            return;
+        }
+        let (t, b) = tangent_frame(n);
+        let frame = Frame { t, b, n };
+        let p = self.mesh.positions[r];
+        let origin = [p[0] + self.offset * n[0], p[1] + self.offset * n[1], p[2] + self.offset * n[2]];
+        for (l, v) in local.iter_mut().zip(&self.mesh.positions) {
+            let d = [v[0] - origin[0], v[1] - origin[1], v[2] - origin[2]];
+            *l = [dot(d, t), dot(d, b), dot(d, n)];
+        }
+        let mask = self.visibility(r as u32, local);
+        let view = self.views.as_ref().map_or(n, |v| v[r]);
+        self.quadrature.integrate(&mask, &frame, self.brdf, view, out);
+    }
+
+    /// The receiver's visibility mask: every triangle but its own incident ones.
+    fn visibility(&self, r: u32, local: &[Vec3]) -> Mask {
+        let mut mask = Mask::EMPTY;
+        for chunk in self.mesh.triangles.chunks(64) {
+            for tri in chunk {
+                if tri.contains(&r) {
+                    continue;
+                }
+                let [a, b, c] = tri.map(|i| local[i as usize]);
+                if let Some(covered) = triangle_mask(self.table, a, b, c) {
+                    mask.or_assign(&covered);
+                }
+            }
+            if mask == self.disk {
+                break; // fully occluded: nothing more can change
+            }
+        }
+        mask
+    }
+}
+
+/// The visibility mask of one receiver point with normal n, over the given triangles
+/// (world space, no exclusions): for inspection, pictures and tests.
+pub fn visibility_mask(point: Vec3, normal: Vec3, vertices: &[Vec3], triangles: &[[u32; 3]], table_resolution: usize) -> Result<Mask> {
+    let n = normalize(normal).ok_or_else(|| Error::invalid("normal must be a finite, non-zero direction"))?;
+    if !point.iter().all(|c| c.is_finite()) {
+        return Err(Error::invalid("point must be finite"));
+    }
+    let mesh = weld(vertices, triangles)?;
+    let table = PlaneTable::shared(table_resolution)?;
+    let (t, b) = tangent_frame(n);
+    let local: Vec<Vec3> = mesh
+        .positions
+        .iter()
+        .map(|v| {
+            let d = [v[0] - point[0], v[1] - point[1], v[2] - point[2]];
+            [dot(d, t), dot(d, b), dot(d, n)]
+        })
+        .collect();
+    let mut mask = Mask::EMPTY;
+    for tri in &mesh.triangles {
+        let [a, b, c] = tri.map(|i| local[i as usize]);
+        if let Some(covered) = triangle_mask(&table, a, b, c) {
+            mask.or_assign(&covered);
+        }
+    }
+    Ok(mask)
+}
