@@ -76,7 +76,7 @@ def transfer(vertices, triangles, normals=None, *, bands=5, brdf="diffuse", expo
     result, missing = _native.transfer(verts, tris, norms, _checks.band_count(bands), exponent, view_one, view_each,
                                        None if offset is None else float(offset), int(table_resolution))
     if missing:
-        warnings.warn(f"{missing} vertices touch no triangle and have no normal: their transfer is zero",
+        warnings.warn(f"{missing} vertices touch no triangle of non-zero area and have no normal: their transfer is zero",
                       RuntimeWarning, stacklevel=2)
     return result
 
