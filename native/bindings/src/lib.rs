@@ -75,7 +75,7 @@ fn sh_basis<'py>(py: Python<'py>, directions: PyReadonlyArray2<f32>, bands: usiz
 
 /// Per-vertex transfer vectors; returns (transfer (N, bands^2), vertices without a normal).
 #[pyfunction]
-#[pyo3(signature = (vertices, triangles, normals, bands, exponent, view, views, offset, table_resolution))]
+#[pyo3(signature = (vertices, triangles, normals, bands, exponent, view, views, offset, table_resolution, downsample))]
 #[allow(clippy::too_many_arguments)]
 fn transfer<'py>(
     py: Python<'py>,
@@ -88,6 +88,7 @@ fn transfer<'py>(
     views: Option<PyReadonlyArray2<f32>>,
     offset: Option<f32>,
     table_resolution: usize,
+    downsample: usize,
 ) -> PyResult<(Bound<'py, PyArray2<f32>>, usize)> {
     let vertices = rows3(&vertices, "vertices")?;
     let triangles = triangles3(&triangles)?;
@@ -98,7 +99,7 @@ fn transfer<'py>(
         (None, None) => None,
     };
     let brdf = exponent.map_or(engine::Brdf::Diffuse, |exponent| engine::Brdf::Phong { exponent });
-    let settings = engine::Settings { bands, brdf, view, offset, table_resolution };
+    let settings = engine::Settings { bands, brdf, view, offset, table_resolution, downsample };
     let n = vertices.len();
     let output = run(py, || engine::transfer(&vertices, &triangles, normals.as_deref(), &settings))?;
     Ok((matrix(output.transfer, n, output.coeffs, py), output.missing_normals))
@@ -187,6 +188,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(visibility_mask, m)?)?;
     m.add_function(wrap_pyfunction!(disk_cells, m)?)?;
     m.add("DEFAULT_TABLE_RESOLUTION", engine::plane_table::DEFAULT_RESOLUTION)?;
+    m.add("DEFAULT_DOWNSAMPLE", engine::transfer::DEFAULT_DOWNSAMPLE)?;
     m.add("MASK_SIDE", engine::disk_mask::MASK_SIDE)?;
     Ok(())
 }

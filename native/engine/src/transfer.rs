@@ -30,21 +30,26 @@ pub struct Settings {
     pub offset: Option<f32>,
     /// Plane-table cube-map resolution (6 x R x R texels).
     pub table_resolution: usize,
+    /// Mask cells per side of an integration block: 4 is the paper's 8x8 grey occlusion term;
+    /// 2 and 1 integrate finer (about half and a third of the error, see docs/accuracy.md).
+    pub downsample: usize,
 }
 
 impl Default for Settings {
     fn default() -> Self {
-        Settings { bands: 5, brdf: Brdf::Diffuse, view: None, offset: None, table_resolution: DEFAULT_RESOLUTION }
+        Settings {
+            bands: 5,
+            brdf: Brdf::Diffuse,
+            view: None,
+            offset: None,
+            table_resolution: DEFAULT_RESOLUTION,
+            downsample: DEFAULT_DOWNSAMPLE,
+        }
     }
 }
 
-/// Quadrature block size: the paper's 4 x 4 for diffuse; glossy lobes need finer sampling.
-pub fn block_size(brdf: Brdf) -> usize {
-    match brdf {
-        Brdf::Diffuse => 4,
-        Brdf::Phong { .. } => 2,
-    }
-}
+/// The paper's 4 x 4 downsampling of the mask before integration.
+pub const DEFAULT_DOWNSAMPLE: usize = 4;
 
 /// Transfer vectors, `bands^2` per input vertex, row-major. Vertices that no triangle touches
 /// and that have no usable normal get zeros; `Output::missing_normals` counts them.
@@ -69,6 +74,9 @@ struct Scene<'a> {
 pub fn transfer(vertices: &[Vec3], triangles: &[[u32; 3]], normals: Option<&[Vec3]>, settings: &Settings) -> Result<Output> {
     let basis = ShBasis::new(settings.bands)?;
     check_brdf(settings.brdf)?;
+    if !matches!(settings.downsample, 1 | 2 | 4 | 8) {
+        return Err(Error::invalid(format!("downsample must be 1, 2, 4 or 8 cells, got {}", settings.downsample)));
+    }
     let mesh = weld(vertices, triangles)?;
     let normals = welded_normals(&mesh, normals)?;
     let views = welded_views(&mesh, settings)?;
@@ -85,7 +93,7 @@ pub fn transfer(vertices: &[Vec3], triangles: &[[u32; 3]], normals: Option<&[Vec
         offset,
         brdf: settings.brdf,
         table: &table,
-        quadrature: Quadrature::new(block_size(settings.brdf), basis),
+        quadrature: Quadrature::new(settings.downsample, basis),
         disk: disk(),
     };
     let k = scene.quadrature.basis().coeffs();

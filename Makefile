@@ -1,0 +1,23 @@
+# Entry points for a fresh machine: `make demo` and `make test` install everything first.
+.PHONY: setup demo test clean
+
+PY := .venv/bin/python
+
+setup:
+	bash scripts/setup.sh
+
+# The main job: spot.obj (ships in tests/assets) lit by Blender's "forest" HDRI
+# (ships with the bpy module), written to out/spot.glb and out/spot.npz.
+demo: setup
+	$(PY) -m hemishadow transfer tests/assets/spot.obj --out out/spot
+
+# cargo first, so that pytest's summary is the run's closing line (cargo's last line
+# is its doc-tests, usually "0 passed"). pytest exits 5 when it collects no test.
+test: setup
+	cargo test --release --manifest-path native/Cargo.toml
+	$(PY) -m pytest -q tests || [ $$? -eq 5 ]
+
+clean:
+	rm -rf .venv out native/target .pytest_cache
+	find . -name __pycache__ -type d -prune -exec rm -rf {} +
+	find native/python -name '_native*.so' -delete
