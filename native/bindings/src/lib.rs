@@ -88,7 +88,7 @@ fn transfer<'py>(
     views: Option<PyReadonlyArray2<f32>>,
     offset: Option<f32>,
     table_resolution: usize,
-    downsample: usize,
+    downsample: Option<usize>,
 ) -> PyResult<(Bound<'py, PyArray2<f32>>, usize)> {
     let vertices = rows3(&vertices, "vertices")?;
     let triangles = triangles3(&triangles)?;
@@ -188,7 +188,6 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(visibility_mask, m)?)?;
     m.add_function(wrap_pyfunction!(disk_cells, m)?)?;
     m.add("DEFAULT_TABLE_RESOLUTION", engine::plane_table::DEFAULT_RESOLUTION)?;
-    m.add("DEFAULT_DOWNSAMPLE", engine::transfer::DEFAULT_DOWNSAMPLE)?;
     m.add("MASK_SIDE", engine::disk_mask::MASK_SIDE)?;
     Ok(())
 }

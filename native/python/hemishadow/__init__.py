@@ -49,7 +49,7 @@ def sh_basis(directions, bands=5):
 
 
 def transfer(vertices, triangles, normals=None, *, bands=5, brdf="diffuse", exponent=None, view=None, offset=None,
-             downsample=_native.DEFAULT_DOWNSAMPLE, table_resolution=_native.DEFAULT_TABLE_RESOLUTION):
+             downsample=None, table_resolution=_native.DEFAULT_TABLE_RESOLUTION):
     """Per-vertex transfer vectors of a mesh: float32 (N, bands*bands).
 
     Every triangle is a potential blocker of every vertex (no hierarchy). Vertices that share
@@ -63,9 +63,9 @@ def transfer(vertices, triangles, normals=None, *, bands=5, brdf="diffuse", expo
     brdf: "diffuse" (T_i = integral of Y_i V max(0, n.s)) or "phong" (normalised Phong,
         (e+2)/(2 pi) max(0, r.s)^e with `exponent` e, r the view mirrored about n).
     view: for "phong", the direction towards the viewer, (3,) for all vertices or (N, 3).
-    downsample: mask cells per side of an integration block; 4 is the paper's 8x8 grey
-        occlusion term, 2 and 1 integrate finer at a small cost (about half and a third of
-        the error; see docs/accuracy.md).
+    downsample: mask cells per side of an integration block (1, 2, 4 or 8); 4 is the paper's
+        8x8 grey occlusion term, 2 and 1 integrate finer at a small cost (about half and a
+        third of the error; see docs/algorithm.md). None: 4 for diffuse, 2 for phong.
     table_resolution: R of the 6 x R x R plane table (128 is the paper's 12 MiB table).
     Vertices touched by no triangle and with no usable normal get zeros and a warning.
     """
@@ -78,7 +78,8 @@ def transfer(vertices, triangles, normals=None, *, bands=5, brdf="diffuse", expo
     if offset is not None and not (np.isfinite(offset) and offset >= 0):
         raise ValueError(f"offset must be a finite, non-negative distance, got {offset!r}")
     result, missing = _native.transfer(verts, tris, norms, _checks.band_count(bands), exponent, view_one, view_each,
-                                       None if offset is None else float(offset), int(table_resolution), int(downsample))
+                                       None if offset is None else float(offset), int(table_resolution),
+                                       None if downsample is None else int(downsample))
     if missing:
         warnings.warn(f"{missing} vertices touch no triangle of non-zero area and have no normal: their transfer is zero",
                       RuntimeWarning, stacklevel=2)
