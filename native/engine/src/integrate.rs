@@ -12,7 +12,7 @@
 //! Glossy (normalised Phong) transfer depends on the view, so it is integrated in world space:
 //! each block is a quadrature point at the centroid of its visible cells.
 
-use crate::disk_mask::{cell_centre, disk, lift, Mask, MASK_SIDE};
+use crate::disk_mask::{cell_centre, cell_samples, disk, is_full, lift, Mask, CELL_SIZE, MASK_SIDE};
 use crate::sh::{clamped_cosine_zonal, ShBasis, MAX_COEFFS};
 use crate::sh_rotation::ShRotator;
 
@@ -49,8 +49,10 @@ struct Block {
     row0: usize,
     col0: usize,
     in_disk: u64,
-    /// 1 / (number of in-disk cells of the block): blocked cells -> grey value.
-    grey_scale: f32,
+    /// Every cell wholly inside the disk: counting bits measures area and centroid.
+    full: bool,
+    /// The block's area of the disk.
+    area: f32,
 }
 
 /// Quadrature over B x B blocks of the mask.
@@ -65,7 +67,6 @@ pub struct Quadrature {
     local_open: [f32; MAX_COEFFS],
     col_masks: Vec<u64>,
     row_masks: Vec<u64>,
-    cell_weight: f32,
 }
 
 impl Quadrature {
@@ -85,15 +86,16 @@ impl Quadrature {
             local_open,
             col_masks: (0..block).map(|k| (0..block).fold(0, |m, j| m | 1u64 << (j * block + k))).collect(),
             row_masks: (0..block).map(|j| ((1u64 << block) - 1) << (j * block)).collect(),
-            cell_weight: std::f32::consts::PI / disk.count() as f32,
         };
         for br in 0..per_side {
             for bc in 0..per_side {
                 let (row0, col0) = (br * block, bc * block);
                 let in_disk = quadrature.pattern(&disk, row0, col0);
                 if in_disk != 0 {
-                    let grey_scale = 1.0 / in_disk.count_ones() as f32;
-                    quadrature.blocks.push(Block { row0, col0, in_disk, grey_scale });
+                    let full = (row0..row0 + block).all(|r| (col0..col0 + block).all(|c| is_full(r, c)));
+                    let mut b = Block { row0, col0, in_disk, full, area: 0.0 };
+                    b.area = quadrature.measure(&b, in_disk).0;
+                    quadrature.blocks.push(b);
                     let weights = block_integral(&quadrature.basis, row0, col0, block);
                     quadrature.local_weights.extend_from_slice(&weights);
                 }
@@ -106,23 +108,39 @@ impl Quadrature {
     #[inline(always)]
     fn pattern(&self, mask: &Mask, row0: usize, col0: usize) -> u64 {
         let b = self.block;
-        let low = if b == 32 { u32::MAX } else { (1u32 << b) - 1 };
+        let low = (1u32 << b) - 1;
         (0..b).fold(0u64, |p, j| p | (((mask.row_bits(row0 + j) >> col0) & low) as u64) << (j * b))
     }
 
-    /// Cell count and the local direction through the centroid of the cells of `pattern`.
+    /// Disk area of the cells of `pattern` in `block` and the local direction through their
+    /// centroid: by bit counts inside the disk, by each cell's measured part on the rim.
     #[inline(always)]
-    fn centroid(&self, pattern: u64, row0: usize, col0: usize) -> (f32, [f32; 3]) {
-        let count = pattern.count_ones() as f32;
-        let (mut sum_col, mut sum_row) = (0u32, 0u32);
-        for k in 1..self.block {
-            sum_col += k as u32 * (pattern & self.col_masks[k]).count_ones();
-            sum_row += k as u32 * (pattern & self.row_masks[k]).count_ones();
+    fn measure(&self, block: &Block, pattern: u64) -> (f32, [f32; 3]) {
+        let (x, y, area);
+        if block.full {
+            let count = pattern.count_ones() as f32;
+            let (mut sum_col, mut sum_row) = (0u32, 0u32);
+            for k in 1..self.block {
+                sum_col += k as u32 * (pattern & self.col_masks[k]).count_ones();
+                sum_row += k as u32 * (pattern & self.row_masks[k]).count_ones();
+            }
+            x = cell_centre(block.col0) + CELL_SIZE * sum_col as f32 / count;
+            y = cell_centre(block.row0) + CELL_SIZE * sum_row as f32 / count;
+            area = count * CELL_SIZE * CELL_SIZE;
+        } else {
+            let (mut a, mut sx, mut sy) = (0.0f32, 0.0f32, 0.0f32);
+            let mut bits = pattern;
+            while bits != 0 {
+                let bit = bits.trailing_zeros() as usize;
+                bits &= bits - 1;
+                let cell = cell_samples()[(block.row0 + bit / self.block) * MASK_SIDE + block.col0 + bit % self.block];
+                a += cell.area;
+                sx += cell.area * cell.x;
+                sy += cell.area * cell.y;
+            }
+            (x, y, area) = (sx / a, sy / a, a);
         }
-        let cell = 2.0 / MASK_SIDE as f32;
-        let x = cell_centre(col0) + cell * sum_col as f32 / count;
-        let y = cell_centre(row0) + cell * sum_row as f32 / count;
-        (count, lift(x, y))
+        (area, lift(x, y))
     }
 
     pub fn basis(&self) -> &ShBasis {
@@ -146,7 +164,11 @@ impl Quadrature {
             if pattern == 0 {
                 continue;
             }
-            let grey = pattern.count_ones() as f32 * block.grey_scale;
+            let grey = if block.full {
+                pattern.count_ones() as f32 / block.in_disk.count_ones() as f32
+            } else {
+                self.measure(block, pattern).0 / block.area
+            };
             local[..k].iter_mut().zip(weights).for_each(|(t, w)| *t -= grey * w);
         }
         self.rotator.to_world([frame.t, frame.b, frame.n], &local[..k], out);
@@ -166,14 +188,14 @@ impl Quadrature {
             if pattern == 0 {
                 continue;
             }
-            let (count, local) = self.centroid(pattern, block.row0, block.col0);
+            let (area, local) = self.measure(block, pattern);
             let s = frame.to_world(local);
             let rs = crate::rasterizer::dot(r, s);
             if rs <= 0.0 {
                 continue;
             }
             self.basis.eval(s, &mut y);
-            let w = count * self.cell_weight * norm * rs.powf(exponent);
+            let w = area * norm * rs.powf(exponent);
             out.iter_mut().zip(&y[..k]).for_each(|(o, yi)| *o += w * yi);
         }
     }

@@ -31,8 +31,8 @@ pub struct Settings {
     /// Plane-table cube-map resolution (6 x R x R texels).
     pub table_resolution: usize,
     /// Mask cells per side of an integration block: 4 is the paper's 8x8 grey occlusion term;
-    /// 2 and 1 integrate finer (about half and a third of the error, see docs/accuracy.md).
-    /// None: 4 for diffuse, 2 for glossy, whose lobes 4 x 4 blocks sample too coarsely.
+    /// 2 and 1 integrate finer (about half and a third of the error, see docs/algorithm.md).
+    /// None: 4 for diffuse, 2 for glossy up to exponent 16 and 1 beyond (see default_downsample).
     pub downsample: Option<usize>,
 }
 
@@ -50,11 +50,13 @@ impl Default for Settings {
 }
 
 /// Default downsampling of the mask before integration: the paper's 4 x 4 for diffuse
-/// receivers; glossy lobes need 2 x 2 (4 x 4 blocks give 7 % median error at exponent 8).
+/// receivers; glossy lobes need 2 x 2 (4 x 4 blocks give 7 % median error at exponent 8),
+/// and lobes sharper than exponent 16 every cell.
 pub fn default_downsample(brdf: Brdf) -> usize {
     match brdf {
         Brdf::Diffuse => 4,
-        Brdf::Phong { .. } => 2,
+        Brdf::Phong { exponent } if exponent <= 16.0 => 2,
+        Brdf::Phong { .. } => 1,
     }
 }
 

@@ -65,7 +65,8 @@ def transfer(vertices, triangles, normals=None, *, bands=5, brdf="diffuse", expo
     view: for "phong", the direction towards the viewer, (3,) for all vertices or (N, 3).
     downsample: mask cells per side of an integration block (1, 2, 4 or 8); 4 is the paper's
         8x8 grey occlusion term, 2 and 1 integrate finer at a small cost (about half and a
-        third of the error; see docs/algorithm.md). None: 4 for diffuse, 2 for phong.
+        third of the error; see docs/algorithm.md). None: 4 for diffuse; for phong 2, or 1 above
+        exponent 16.
     table_resolution: R of the 6 x R x R plane table (128 is the paper's 12 MiB table).
     Vertices touched by no triangle and with no usable normal get zeros and a warning.
     """
