@@ -13,9 +13,11 @@ import numpy as np
 
 from . import _checks, _native
 from .sh import euler_to_matrix, rotate_sh, rotation_matrix, window_sh
+from .solver import TransferSolver
 
 __all__ = [
     "AO_UNOCCLUDED",
+    "TransferSolver",
     "ambient_occlusion",
     "disk_cells",
     "euler_to_matrix",
