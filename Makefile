@@ -1,5 +1,5 @@
 # Entry points for a fresh machine: `make demo` and `make test` install everything first.
-.PHONY: setup demo test clean
+.PHONY: setup demo test clean extension
 
 PY := .venv/bin/python
 
@@ -17,7 +17,11 @@ test: setup
 	cargo test --release --manifest-path native/Cargo.toml
 	$(PY) -m pytest -q tests || [ $$? -eq 5 ]
 
+# The Blender extension zip: dist/hemishadow-0.1.0-linux_x64.zip (docs/packaging.md).
+extension: setup
+	$(PY) scripts/build_extension.py
+
 clean:
-	rm -rf .venv out native/target .pytest_cache
+	rm -rf .venv out native/target .pytest_cache build dist
 	find . -name __pycache__ -type d -prune -exec rm -rf {} +
 	find native/python -name '_native*.so' -delete

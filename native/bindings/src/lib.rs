@@ -93,16 +93,92 @@ fn transfer<'py>(
     let vertices = rows3(&vertices, "vertices")?;
     let triangles = triangles3(&triangles)?;
     let normals = normals.map(|n| rows3(&n, "normals")).transpose()?;
-    let view = match (view, views) {
-        (Some(v), _) => Some(engine::View::Direction(vec3(&v, "view")?)),
-        (None, Some(v)) => Some(engine::View::PerVertex(rows3(&v, "view")?)),
-        (None, None) => None,
-    };
+    let view = view_argument(view, views)?;
     let brdf = exponent.map_or(engine::Brdf::Diffuse, |exponent| engine::Brdf::Phong { exponent });
     let settings = engine::Settings { bands, brdf, view, offset, table_resolution, downsample };
     let n = vertices.len();
     let output = run(py, || engine::transfer(&vertices, &triangles, normals.as_deref(), &settings))?;
     Ok((matrix(output.transfer, n, output.coeffs, py), output.missing_normals))
+}
+
+/// A per-mesh solver for deforming meshes (see `hemishadow.TransferSolver`).
+#[pyclass(name = "Solver", module = "hemishadow._native")]
+struct PySolver {
+    inner: engine::Solver,
+}
+
+fn view_argument(view: Option<PyReadonlyArray1<f32>>, views: Option<PyReadonlyArray2<f32>>) -> PyResult<Option<engine::View>> {
+    Ok(match (view, views) {
+        (Some(v), _) => Some(engine::View::Direction(vec3(&v, "view")?)),
+        (None, Some(v)) => Some(engine::View::PerVertex(rows3(&v, "view")?)),
+        (None, None) => None,
+    })
+}
+
+#[pymethods]
+impl PySolver {
+    #[new]
+    #[pyo3(signature = (rest, triangles, bands, exponent, offset, table_resolution, downsample, hierarchy, coarse_triangles, ring, cull, reuse))]
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        py: Python<'_>,
+        rest: PyReadonlyArray2<f32>,
+        triangles: PyReadonlyArray2<u32>,
+        bands: usize,
+        exponent: Option<f32>,
+        offset: Option<f32>,
+        table_resolution: usize,
+        downsample: Option<usize>,
+        hierarchy: bool,
+        coarse_triangles: Option<usize>,
+        ring: usize,
+        cull: bool,
+        reuse: bool,
+    ) -> PyResult<Self> {
+        let rest = rows3(&rest, "rest_vertices")?;
+        let triangles = triangles3(&triangles)?;
+        let brdf = exponent.map_or(engine::Brdf::Diffuse, |exponent| engine::Brdf::Phong { exponent });
+        let settings = engine::Settings { bands, brdf, view: None, offset, table_resolution, downsample };
+        let blockers = engine::Blockers { hierarchy, coarse_triangles, ring, cull, reuse };
+        let inner = run(py, || engine::Solver::new(&rest, &triangles, &settings, blockers))?;
+        Ok(PySolver { inner })
+    }
+
+    /// Transfer (N, bands^2) for this frame's positions.
+    #[pyo3(signature = (vertices, normals, view, views))]
+    fn solve<'py>(
+        &mut self,
+        py: Python<'py>,
+        vertices: PyReadonlyArray2<f32>,
+        normals: Option<PyReadonlyArray2<f32>>,
+        view: Option<PyReadonlyArray1<f32>>,
+        views: Option<PyReadonlyArray2<f32>>,
+    ) -> PyResult<Bound<'py, PyArray2<f32>>> {
+        let vertices = rows3(&vertices, "vertices")?;
+        let normals = normals.map(|n| rows3(&n, "normals")).transpose()?;
+        let view = view_argument(view, views)?;
+        let n = vertices.len();
+        let k = self.inner.coeffs();
+        let inner = &mut self.inner;
+        let values = run(py, || inner.solve(&vertices, normals.as_deref(), view.as_ref()))?;
+        Ok(matrix(values, n, k, py))
+    }
+
+    /// (blockers per computed receiver, receivers computed, receivers reused) of the last solve.
+    fn stats(&self) -> (f64, usize, usize) {
+        let s = self.inner.stats();
+        (s.blockers_per_receiver, s.computed, s.reused)
+    }
+
+    #[getter]
+    fn coarse_triangles(&self) -> usize {
+        self.inner.coarse_triangles()
+    }
+
+    #[getter]
+    fn vertex_count(&self) -> usize {
+        self.inner.vertex_count()
+    }
 }
 
 /// SH lighting (bands^2, 3) of an equirectangular float image (H, W, 3 or 4), top row first.
@@ -187,6 +263,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(rasterize_local, m)?)?;
     m.add_function(wrap_pyfunction!(visibility_mask, m)?)?;
     m.add_function(wrap_pyfunction!(disk_cells, m)?)?;
+    m.add_class::<PySolver>()?;
     m.add("DEFAULT_TABLE_RESOLUTION", engine::plane_table::DEFAULT_RESOLUTION)?;
     m.add("MASK_SIDE", engine::disk_mask::MASK_SIDE)?;
     Ok(())

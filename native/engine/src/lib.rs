@@ -9,14 +9,17 @@
 pub mod disk_mask;
 pub mod environment;
 pub mod error;
+pub mod hierarchy;
 pub mod integrate;
 pub mod mesh;
 pub mod plane_table;
 pub mod rasterizer;
 pub mod sh;
 pub mod sh_rotation;
+pub mod solver;
 pub mod transfer;
 
 pub use error::{Error, Result};
 pub use integrate::Brdf;
+pub use solver::{Blockers, Solver, Stats};
 pub use transfer::{transfer, Output, Settings, View};

@@ -20,7 +20,7 @@ pub struct WeldedMesh {
     pub remap: Vec<u32>,
 }
 
-fn check_finite(values: &[Vec3], what: &str) -> Result<()> {
+pub fn check_finite(values: &[Vec3], what: &str) -> Result<()> {
     match values.iter().position(|v| !v.iter().all(|c| c.is_finite())) {
         Some(i) => Err(Error::invalid(format!("{what} {i} is not finite: {:?}", values[i]))),
         None => Ok(()),
@@ -74,11 +74,11 @@ pub fn normalize(v: Vec3) -> Option<Vec3> {
     (len > 1e-20 && len.is_finite()).then(|| v.map(|c| c / len))
 }
 
-/// Area-weighted normals of the welded mesh (zero where no triangle touches a vertex).
-pub fn area_normals(mesh: &WeldedMesh) -> Vec<Vec3> {
-    let mut sums = vec![[0.0f32; 3]; mesh.positions.len()];
-    for tri in &mesh.triangles {
-        let [a, b, c] = tri.map(|i| mesh.positions[i as usize]);
+/// Area-weighted normals of a welded mesh (zero where no triangle touches a vertex).
+pub fn area_normals(positions: &[Vec3], triangles: &[[u32; 3]]) -> Vec<Vec3> {
+    let mut sums = vec![[0.0f32; 3]; positions.len()];
+    for tri in triangles {
+        let [a, b, c] = tri.map(|i| positions[i as usize]);
         let face = cross(sub(b, a), sub(c, a)); // length = twice the area
         for &i in tri {
             let s = &mut sums[i as usize];
@@ -91,19 +91,15 @@ pub fn area_normals(mesh: &WeldedMesh) -> Vec<Vec3> {
 /// Normals per welded vertex: the normalised mean of the given normals of its copies, or the
 /// area-weighted normal where none are given or they cancel. A zero normal marks a vertex
 /// that no triangle touches and that has no usable given normal.
-pub fn welded_normals(mesh: &WeldedMesh, given: Option<&[Vec3]>) -> Result<Vec<Vec3>> {
-    let area = area_normals(mesh);
+pub fn welded_normals(positions: &[Vec3], triangles: &[[u32; 3]], remap: &[u32], given: Option<&[Vec3]>) -> Result<Vec<Vec3>> {
+    let area = area_normals(positions, triangles);
     let Some(given) = given else { return Ok(area) };
-    if given.len() != mesh.remap.len() {
-        return Err(Error::invalid(format!(
-            "normals has {} rows but vertices has {}",
-            given.len(),
-            mesh.remap.len()
-        )));
+    if given.len() != remap.len() {
+        return Err(Error::invalid(format!("normals has {} rows but vertices has {}", given.len(), remap.len())));
     }
     check_finite(given, "normal")?;
-    let mut sums = vec![[0.0f32; 3]; mesh.positions.len()];
-    for (n, &w) in given.iter().zip(&mesh.remap) {
+    let mut sums = vec![[0.0f32; 3]; positions.len()];
+    for (n, &w) in given.iter().zip(remap) {
         if let Some(unit) = normalize(*n) {
             sums[w as usize] = add(sums[w as usize], unit);
         }

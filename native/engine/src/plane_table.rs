@@ -31,13 +31,15 @@ pub struct PlaneTable {
 fn texel_of(m: [f32; 3], resolution: usize) -> usize {
     let [x, y, z] = m;
     let (ax, ay, az) = (x.abs(), y.abs(), z.abs());
-    let (face, u, v, major) = if ax >= ay && ax >= az {
-        ((x < 0.0) as usize, y, z, ax)
-    } else if ay >= az {
-        (2 + (y < 0.0) as usize, x, z, ay)
-    } else {
-        (4 + (z < 0.0) as usize, x, y, az)
-    };
+    // Selects rather than branches: plane normals are random, so branches would mispredict.
+    let x_major = ax >= ay && ax >= az;
+    let y_major = !x_major && ay >= az;
+    let axis = if x_major { 0 } else if y_major { 1 } else { 2 };
+    let major = if x_major { ax } else if y_major { ay } else { az };
+    let sign_negative = (if x_major { x } else if y_major { y } else { z }) < 0.0;
+    let u = if x_major { y } else { x };
+    let v = if x_major || y_major { z } else { y };
+    let face = 2 * axis + sign_negative as usize;
     let half = 0.5 * resolution as f32;
     let scale = half / major;
     // Float-to-int casts saturate, so a zero or NaN normal still lands inside the table.

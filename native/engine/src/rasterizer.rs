@@ -24,21 +24,26 @@ fn negate(a: [f32; 3]) -> [f32; 3] {
 }
 
 /// Below this |det| / (|a| |b| |c|) the receiver lies (almost) in the triangle's plane: the
-/// cone has no solid angle, and its edge planes would be numerical noise.
-const FLAT_CONE: f32 = 1e-6;
+/// cone has no solid angle, and its edge planes would be numerical noise. Compared squared.
+const FLAT_CONE_SQUARED: f32 = 1e-12;
+
+/// Whether any corner of a triangle (local coordinates) is above the receiver's horizon.
+#[inline(always)]
+pub fn above_horizon(a: [f32; 3], b: [f32; 3], c: [f32; 3]) -> bool {
+    a[2] > 0.0 || b[2] > 0.0 || c[2] > 0.0
+}
 
 /// Mask of the cells covered by triangle (a, b, c) given relative to the receiver in its tangent
 /// frame (+Z = normal). None when it covers nothing: entirely below the horizon, degenerate,
 /// or touching the receiver.
 #[inline(always)]
 pub fn triangle_mask(table: &PlaneTable, a: [f32; 3], b: [f32; 3], c: [f32; 3]) -> Option<Mask> {
-    if a[2] <= 0.0 && b[2] <= 0.0 && c[2] <= 0.0 {
+    if !above_horizon(a, b, c) {
         return None;
     }
     let (ab, bc, ca) = (cross(a, b), cross(b, c), cross(c, a));
     let det = dot(ab, c);
-    let scale = (dot(a, a) * dot(b, b) * dot(c, c)).sqrt();
-    if !(det.abs() > FLAT_CONE * scale) {
+    if !(det * det > FLAT_CONE_SQUARED * (dot(a, a) * dot(b, b) * dot(c, c))) {
         return None; // also rejects NaN
     }
     // Orient the edge planes so that the opposite vertex is on their positive side.

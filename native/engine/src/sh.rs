@@ -64,7 +64,22 @@ impl ShBasis {
     /// Writes Y_i(d) for a unit direction d into `out[..coeffs]`.
     #[inline]
     pub fn eval(&self, d: [f32; 3], out: &mut [f32]) {
-        let bands = self.bands;
+        // A constant band count lets the compiler unroll the recursions into straight code.
+        match self.bands {
+            3 => self.eval_bands::<3>(d, out),
+            4 => self.eval_bands::<4>(d, out),
+            5 => self.eval_bands::<5>(d, out),
+            _ => self.eval_any(d, out, self.bands),
+        }
+    }
+
+    #[inline(always)]
+    fn eval_bands<const B: usize>(&self, d: [f32; 3], out: &mut [f32]) {
+        self.eval_any(d, out, B)
+    }
+
+    #[inline(always)]
+    fn eval_any(&self, d: [f32; 3], out: &mut [f32], bands: usize) {
         let out = &mut out[..bands * bands];
         let [x, y, z] = d;
         // (cm, sm) = (Re, Im) of (x + iy)^m; qmm = Q_mm / sin^m = prod (1 - 2k).

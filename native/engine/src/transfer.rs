@@ -88,7 +88,7 @@ pub fn transfer(vertices: &[Vec3], triangles: &[[u32; 3]], normals: Option<&[Vec
         return Err(Error::invalid(format!("downsample must be 1, 2, 4 or 8 cells, got {downsample}")));
     }
     let mesh = weld(vertices, triangles)?;
-    let normals = welded_normals(&mesh, normals)?;
+    let normals = welded_normals(&mesh.positions, &mesh.triangles, &mesh.remap, normals)?;
     let views = welded_views(&mesh, settings)?;
     let offset = match settings.offset {
         Some(o) if o.is_finite() && o >= 0.0 => o,
@@ -117,7 +117,7 @@ pub fn transfer(vertices: &[Vec3], triangles: &[[u32; 3]], normals: Option<&[Vec
     Ok(Output { coeffs: k, transfer, missing_normals })
 }
 
-fn check_brdf(brdf: Brdf) -> Result<()> {
+pub(crate) fn check_brdf(brdf: Brdf) -> Result<()> {
     match brdf {
         Brdf::Phong { exponent } if !(exponent.is_finite() && exponent >= 0.0) => {
             Err(Error::invalid(format!("the Phong exponent must be finite and non-negative, got {exponent}")))
@@ -127,7 +127,7 @@ fn check_brdf(brdf: Brdf) -> Result<()> {
 }
 
 /// Unit view direction per welded vertex (the first copy's), for glossy BRDFs.
-fn welded_views(mesh: &WeldedMesh, settings: &Settings) -> Result<Option<Vec<Vec3>>> {
+pub(crate) fn welded_views(mesh: &WeldedMesh, settings: &Settings) -> Result<Option<Vec<Vec3>>> {
     let unit = |v: Vec3, what: String| normalize(v).ok_or_else(|| Error::invalid(format!("{what} must be a finite, non-zero direction, got {v:?}")));
     match (&settings.brdf, &settings.view) {
         (Brdf::Diffuse, _) => Ok(None),
@@ -148,25 +148,46 @@ fn welded_views(mesh: &WeldedMesh, settings: &Settings) -> Result<Option<Vec<Vec
     }
 }
 
+/// A receiver's tangent frame and the point it sees from, `offset` along its normal.
+#[derive(Clone, Copy)]
+pub struct Receiver {
+    pub frame: Frame,
+    pub origin: Vec3,
+}
+
+impl Receiver {
+    /// None for a vertex without a normal.
+    #[inline]
+    pub fn new(position: Vec3, n: Vec3, offset: f32) -> Option<Self> {
+        if n == [0.0; 3] {
+            return None;
+        }
+        let (t, b) = tangent_frame(n);
+        let origin = [position[0] + offset * n[0], position[1] + offset * n[1], position[2] + offset * n[2]];
+        Some(Receiver { frame: Frame { t, b, n }, origin })
+    }
+
+    /// A world-space point in the receiver's tangent frame, relative to its origin.
+    #[inline(always)]
+    pub fn to_local(&self, v: Vec3) -> Vec3 {
+        let d = [v[0] - self.origin[0], v[1] - self.origin[1], v[2] - self.origin[2]];
+        [dot(d, self.frame.t), dot(d, self.frame.b), dot(d, self.frame.n)]
+    }
+}
+
 impl Scene<'_> {
     /// Transfer of welded vertex `r`; `local` is scratch for the mesh in its tangent frame.
     fn receiver(&self, r: usize, local: &mut [Vec3], out: &mut [f32]) {
-        let n = self.normals[r];
-        if n == [0.0; 3] {
+        let Some(receiver) = Receiver::new(self.mesh.positions[r], self.normals[r], self.offset) else {
             out.fill(0.0);
             return;
-        }
-        let (t, b) = tangent_frame(n);
-        let frame = Frame { t, b, n };
-        let p = self.mesh.positions[r];
-        let origin = [p[0] + self.offset * n[0], p[1] + self.offset * n[1], p[2] + self.offset * n[2]];
+        };
         for (l, v) in local.iter_mut().zip(&self.mesh.positions) {
-            let d = [v[0] - origin[0], v[1] - origin[1], v[2] - origin[2]];
-            *l = [dot(d, t), dot(d, b), dot(d, n)];
+            *l = receiver.to_local(*v);
         }
         let mask = self.visibility(r as u32, local);
-        let view = self.views.as_ref().map_or(n, |v| v[r]);
-        self.quadrature.integrate(&mask, &frame, self.brdf, view, out);
+        let view = self.views.as_ref().map_or(receiver.frame.n, |v| v[r]);
+        self.quadrature.integrate(&mask, &receiver.frame, self.brdf, view, out);
     }
 
     /// The receiver's visibility mask: every triangle but its own incident ones.

@@ -3,39 +3,80 @@ every frame with new positions."""
 
 import numpy as np
 
-from . import _checks
+from . import _checks, _native
 
 
 class TransferSolver:
     """Transfer vectors of one mesh topology over many frames (poses, simulation steps).
 
-    Build it once per mesh (topology and a rest pose); call `solve` every frame with the
-    deformed positions. Lighting never enters: shade the result with `hemishadow.shade`.
+    Built once from the triangles and a rest pose, it keeps what does not change while the
+    mesh deforms: the weld map, the two-level mesh hierarchy of the paper (the receiver's
+    `ring`-ring of fine triangles, a coarse mesh of about `coarse_triangles` triangles made of
+    a subset of the fine vertices by meshoptimizer for the rest), the clusters and the offset.
+    Each `solve` refreshes cluster bounds, culls clusters below a receiver's horizon and
+    reuses the last result of receivers whose blockers did not move. Lighting never enters:
+    shade the result with `hemishadow.shade`.
 
-    triangles: (M, 3) vertex indices; rest_vertices: (N, 3) positions of a rest pose.
-    The keyword arguments are those of `hemishadow.transfer`.
+    rest_vertices: (N, 3); triangles: (M, 3). bands, brdf, exponent, offset, downsample and
+    table_resolution are those of `hemishadow.transfer` (the offset defaults to 1e-3 x the
+    rest pose's mean edge length and then stays fixed).
+    hierarchy=False makes every fine triangle a blocker (the exact path of `transfer`, with
+    culling and reuse); cull and reuse switch those optimisations.
     """
 
     def __init__(self, rest_vertices, triangles, *, bands=5, brdf="diffuse", exponent=None, offset=None,
-                 downsample=None):
+                 downsample=None, table_resolution=_native.DEFAULT_TABLE_RESOLUTION, hierarchy=True,
+                 coarse_triangles=None, ring=2, cull=True, reuse=True):
+        from . import _brdf_arguments
+
         rest = _checks.points(rest_vertices, "rest_vertices")
-        self.triangles = _checks.triangle_indices(triangles, len(rest))
-        if len(rest) == 0 or len(self.triangles) == 0:
+        tris = _checks.triangle_indices(triangles, len(rest))
+        if len(rest) == 0 or len(tris) == 0:
             raise ValueError("the mesh is empty: it needs at least one vertex and one triangle")
-        self.vertex_count = len(rest)
-        self.options = dict(bands=_checks.band_count(bands), brdf=brdf, exponent=exponent, offset=offset,
-                            downsample=downsample)
+        if brdf not in ("diffuse", "phong"):
+            raise ValueError(f"brdf must be 'diffuse' or 'phong', got {brdf!r}")
+        exponent, _, _ = _brdf_arguments(brdf, exponent, [0.0, 0.0, 1.0], len(rest))
+        if offset is not None and not (np.isfinite(offset) and offset >= 0):
+            raise ValueError(f"offset must be a finite, non-negative distance, got {offset!r}")
+        if coarse_triangles is not None and (int(coarse_triangles) != coarse_triangles or coarse_triangles < 1):
+            raise ValueError(f"coarse_triangles must be a positive integer, got {coarse_triangles!r}")
+        self.bands = _checks.band_count(bands)
+        self.brdf = brdf
+        self._solver = _native.Solver(rest, tris, self.bands, exponent, None if offset is None else float(offset),
+                                      int(table_resolution), None if downsample is None else int(downsample),
+                                      bool(hierarchy), None if coarse_triangles is None else int(coarse_triangles),
+                                      int(ring), bool(cull), bool(reuse))
 
     @property
-    def coefficients(self):
-        return self.options["bands"] ** 2
+    def vertex_count(self):
+        return self._solver.vertex_count
+
+    @property
+    def coarse_triangles(self):
+        """Triangles of the coarse mesh (clusters)."""
+        return self._solver.coarse_triangles
+
+    @property
+    def stats(self):
+        """Last solve: {'blockers_per_vertex', 'computed', 'reused'}."""
+        blockers, computed, reused = self._solver.stats()
+        return {"blockers_per_vertex": blockers, "computed": computed, "reused": reused}
 
     def solve(self, vertices, normals=None, view=None):
-        """Transfer (N, bands^2) float32 for the positions of this frame."""
-        from . import transfer
-
+        """Transfer (N, bands^2) float32 for this frame's positions (N, 3); normals and view as
+        in `hemishadow.transfer`."""
         verts = _checks.points(vertices, "vertices")
         if len(verts) != self.vertex_count:
             raise ValueError(f"the solver was built for {self.vertex_count} vertices, got {len(verts)}: "
                              "the topology changed, build a new solver")
-        return transfer(verts, self.triangles, normals, view=view, **self.options)
+        norms = None if normals is None else _checks.float_array(normals, "normals", (len(verts), 3))
+        view_one = view_each = None
+        if self.brdf == "phong":
+            if view is None:
+                raise ValueError("the phong BRDF needs a view direction: (3,) or one per vertex (N, 3)")
+            array = np.asarray(view)
+            if array.ndim == 1:
+                view_one = _checks.float_array(array, "view", (3,))
+            else:
+                view_each = _checks.float_array(array, "view", (len(verts), 3))
+        return self._solver.solve(verts, norms, view_one, view_each)

@@ -1,0 +1,20 @@
+"""hemishadow: soft self-shadowing of deforming meshes from environment lighting.
+
+Registration only. The engine (`hemishadow`, shipped as a wheel inside the extension) is
+imported lazily by the modules that compute, so registering never loads it.
+"""
+
+from . import cli, handlers, operators, panels, properties
+
+# Properties first: operators and panels refer to them; handlers last, once all is in place.
+_modules = (properties, operators, panels, cli, handlers)
+
+
+def register():
+    for module in _modules:
+        module.register()
+
+
+def unregister():
+    for module in reversed(_modules):
+        module.unregister()

@@ -1,0 +1,216 @@
+"""The live path: one `hemishadow.TransferSolver` per object, kept between frames.
+
+A solver is keyed by the object's topology (vertex and triangle counts and a hash of the
+triangle indices) and the transfer settings (bands, BRDF, exponent); it is rebuilt when any
+of them changes. The last transfer vectors of every object are kept, so a change of lighting
+or albedo only re-shades (a matrix product), and a depsgraph update that did not move any
+vertex (for instance the one our own attribute writes cause) computes nothing.
+
+Time is split into Blender I/O (reading the evaluated mesh, writing attributes) and engine
+time (transfer, shading), per object, in `last_timings`.
+"""
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import mesh_io
+
+
+@dataclass
+class _Entry:
+    key: tuple
+    solver: object
+    fingerprint: int | None = None  # hash of the positions (and view) `transfer` was computed on
+    transfer: np.ndarray | None = None
+
+
+@dataclass
+class Result:
+    transfer: np.ndarray
+    ao: np.ndarray
+    radiance: np.ndarray
+    io_seconds: float = 0.0
+    engine_seconds: float = 0.0
+
+
+# Keyed by ID.session_uid: stable while the object lives, unlike its name.
+_entries: dict[int, _Entry] = {}
+#: object name -> (vertex count, Blender I/O seconds, engine seconds) of its last computation.
+last_timings: dict[str, tuple[int, float, float]] = {}
+
+
+def scene_lighting(scene, bands):
+    """Lighting SH (bands*bands, 3) of the scene (world.py)."""
+    from .world import scene_lighting as world_lighting
+
+    return np.asarray(world_lighting(scene, bands), np.float32)
+
+
+def _albedo(obj):
+    return np.asarray(obj.hemishadow.albedo, np.float32)
+
+
+def _solver_for(obj, vertices, triangles):
+    import hemishadow
+
+    settings = obj.hemishadow
+    phong = settings.brdf == "PHONG"
+    key = (len(vertices), len(triangles), hash(triangles.tobytes()), settings.band_count, settings.brdf,
+           round(settings.exponent, 6) if phong else None)
+    entry = _entries.get(obj.session_uid)
+    if entry is None or entry.key != key:
+        # Built on the rest pose, not on this frame: results do not depend on where playback started.
+        solver = hemishadow.TransferSolver(mesh_io.read_rest(obj), triangles, bands=settings.band_count,
+                                           brdf=settings.brdf.lower(), exponent=settings.exponent if phong else None)
+        entry = _entries[obj.session_uid] = _Entry(key, solver)
+    return entry
+
+
+def _view_directions(obj, scene, vertices):
+    """Per-vertex unit directions towards the active camera (Phong), or None (diffuse)."""
+    if obj.hemishadow.brdf != "PHONG":
+        return None
+    if scene.camera is None:
+        raise mesh_io.SkipObject(f"{obj.name}: the Phong BRDF needs an active camera for the view direction")
+    eye = np.asarray(scene.camera.matrix_world.translation, np.float32)
+    view = eye - vertices
+    view /= np.maximum(np.linalg.norm(view, axis=1, keepdims=True), 1e-12)
+    return view
+
+
+def compute_object(obj, depsgraph, scene, *, force=False, lighting=None):
+    """Transfer, AO and radiance of the object's evaluated mesh, as a Result; None when the
+    positions (and view) are those of the last computation and `force` is false.
+    Raises mesh_io.SkipObject, or the engine's ValueError / RuntimeError."""
+    t0 = time.perf_counter()
+    vertices, triangles, normals = mesh_io.read_evaluated(obj, depsgraph)
+    view = _view_directions(obj, scene, vertices)
+    t1 = time.perf_counter()
+    entry = _solver_for(obj, vertices, triangles)
+    fingerprint = hash((vertices.tobytes(), None if view is None else view.tobytes()))
+    written = mesh_io.RADIANCE in obj.data.attributes  # gone after Clear, or undone
+    if not force and written and entry.transfer is not None and entry.fingerprint == fingerprint:
+        return None
+    entry.transfer, entry.fingerprint = None, None  # never keep a stale pair if solve raises
+    transfer = entry.solver.solve(vertices, normals, view)
+    entry.transfer, entry.fingerprint = transfer, fingerprint
+    result = _shade(obj, scene, transfer, lighting)
+    result.io_seconds, result.engine_seconds = t1 - t0, time.perf_counter() - t1
+    return result
+
+
+def _shade(obj, scene, transfer, lighting=None):
+    import hemishadow
+
+    if lighting is None:
+        lighting = scene_lighting(scene, obj.hemishadow.band_count)
+    radiance = hemishadow.shade(transfer, lighting, _albedo(obj))
+    return Result(transfer, hemishadow.ambient_occlusion(transfer), radiance)
+
+
+def _write(obj, result):
+    settings = obj.hemishadow
+    t0 = time.perf_counter()
+    mesh_io.write_outputs(obj, result.radiance, result.ao if settings.write_ao else None,
+                          result.transfer if settings.write_sh else None)
+    mesh_io.remove_sh_layers(obj, keep=result.transfer.shape[1] if settings.write_sh else 0)
+    return time.perf_counter() - t0
+
+
+def set_status(obj, message):
+    # Assigning an ID property tags the object for re-evaluation: only when it changes.
+    if obj.hemishadow.status != message:
+        obj.hemishadow.status = message
+
+
+def update_object(obj, depsgraph, scene, *, force=False, lighting=None):
+    """Compute and write one object's outputs; returns the Result or None (nothing moved).
+    Errors are raised as by compute_object; the status line is set either way."""
+    try:
+        result = compute_object(obj, depsgraph, scene, force=force, lighting=lighting)
+    except (ValueError, RuntimeError) as error:
+        set_status(obj, str(error))
+        raise
+    if result is None:
+        return None
+    result.io_seconds += _write(obj, result)
+    last_timings[obj.name] = (len(result.ao), result.io_seconds, result.engine_seconds)
+    set_status(obj, f"{len(result.ao)} vertices, AO {float(result.ao.min()):.2f}..{float(result.ao.max()):.2f}")
+    return result
+
+
+def enabled_objects(scene):
+    return [o for o in scene.objects if o.type == "MESH" and o.hemishadow.enabled]
+
+
+def update_scene(scene, depsgraph, objects=None, *, force=False):
+    """update_object for each object (default: the enabled ones); returns {name: error message}
+    for those that failed, without raising."""
+    prune()
+    errors, lighting = {}, {}
+    for obj in enabled_objects(scene) if objects is None else objects:
+        bands = obj.hemishadow.band_count
+        try:
+            if bands not in lighting:
+                lighting[bands] = scene_lighting(scene, bands)
+            update_object(obj, depsgraph, scene, force=force, lighting=lighting[bands])
+        except (ValueError, RuntimeError) as error:
+            errors[obj.name] = str(error)
+    return errors
+
+
+def reshade_object(obj, scene, lighting=None):
+    """Re-shade from the last transfer vectors (lighting or albedo changed); False when the
+    object has none yet."""
+    entry = _entries.get(obj.session_uid)
+    if entry is None or entry.transfer is None or obj.type != "MESH" or obj.mode == "EDIT":
+        return False
+    if len(entry.transfer) != len(obj.data.vertices):
+        return False
+    t0 = time.perf_counter()
+    result = _shade(obj, scene, entry.transfer, lighting)
+    engine = time.perf_counter() - t0
+    mesh_io.write_outputs(obj, result.radiance)
+    last_timings[obj.name] = (len(result.ao), time.perf_counter() - t0 - engine, engine)
+    return True
+
+
+def reshade_scene(scene):
+    """Re-shade every object of the scene that has transfer vectors; errors go to the status."""
+    for obj in scene.objects:
+        if obj.session_uid in _entries:
+            try:
+                reshade_object(obj, scene)
+            except (ValueError, RuntimeError) as error:
+                set_status(obj, str(error))
+
+
+def forget(obj=None):
+    """Drop the solver and transfer of one object (all when None)."""
+    if obj is None:
+        _entries.clear()
+    else:
+        _entries.pop(obj.session_uid, None)
+
+
+def forget_positions():
+    """Make the next update of every object compute and write again (after undo or redo the
+    attributes may hold other values than the last ones computed), keeping the solvers."""
+    for entry in _entries.values():
+        entry.fingerprint = None
+
+
+def prune():
+    """Drop entries of objects that no longer exist (deleted, or a new file was loaded)."""
+    import bpy
+
+    alive = {o.session_uid for o in bpy.data.objects}
+    for uid in [u for u in _entries if u not in alive]:
+        del _entries[uid]
+
+
+def has_transfer(obj):
+    entry = _entries.get(obj.session_uid)
+    return entry is not None and entry.transfer is not None

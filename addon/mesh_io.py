@@ -1,0 +1,165 @@
+"""Blender meshes <-> numpy: evaluated positions in, attributes out. No numerical loops here.
+
+Which positions the engine sees (the topology rule). The outputs are point attributes of the
+ORIGINAL mesh (`obj.data`), so the engine must see one position per original vertex:
+- When the evaluated mesh has the original vertex count (armature, shape keys, cloth and any
+  other deforming modifiers), its positions are used with the original triangles.
+- When later modifiers add vertices (Subdivision Surface after Armature, the common case),
+  Blender cannot evaluate "the stack without them" without changing user data (toggling
+  `show_viewport` is an edit the user sees, undoes and saves). But Subdivision Surface,
+  Multiresolution, Mirror and Triangulate keep the original vertices first, in order, in their
+  result, so the first V evaluated vertices are the deformed original vertices (for
+  subdivision: the same vertices moved onto the limit surface, which is where the attribute
+  is displayed). The engine computes on those with the original triangles; the attribute is
+  written on the original mesh and the later modifiers interpolate it.
+- Any other topology-changing modifier (Decimate, Remesh, Boolean, Geometry Nodes, ...) has
+  no such mapping: the object is skipped with a message saying which modifier is in the way.
+
+Welding (seams, triangle soups such as fox.glb) is the engine's job: it welds by position.
+"""
+
+import bpy
+import numpy as np
+
+RADIANCE = "hemishadow_radiance"
+AO = "hemishadow_ao"
+SH_PREFIX = "hemishadow_sh_"
+PREFIX = "hemishadow_"
+
+# Modifiers whose result starts with the original vertices, in order (see the module notes).
+PREFIX_KEEPING = {"SUBSURF", "MULTIRES", "MIRROR", "TRIANGULATE"}
+
+# Modifiers that only move vertices (Blender's "OnlyDeform" types) or leave geometry alone.
+DEFORMING = {
+    "ARMATURE", "CAST", "CLOTH", "COLLISION", "CORRECTIVE_SMOOTH", "CURVE", "DATA_TRANSFER", "DISPLACE",
+    "DYNAMIC_PAINT", "HOOK", "LAPLACIANDEFORM", "LAPLACIANSMOOTH", "LATTICE", "MESH_CACHE", "MESH_DEFORM",
+    "NORMAL_EDIT", "PARTICLE_SYSTEM", "SHRINKWRAP", "SIMPLE_DEFORM", "SMOOTH", "SOFT_BODY", "SURFACE",
+    "SURFACE_DEFORM", "UV_PROJECT", "UV_WARP", "VERTEX_WEIGHT_EDIT", "VERTEX_WEIGHT_MIX", "VERTEX_WEIGHT_PROXIMITY",
+    "WARP", "WAVE", "WEIGHTED_NORMAL", "VOLUME_DISPLACE",
+}
+
+
+class SkipObject(ValueError):
+    """The object cannot be computed now (no faces, Edit Mode, unmappable modifier); the
+    message says why, for the status line."""
+
+
+def triangles_of(mesh) -> np.ndarray:
+    """Loop triangles of a mesh as uint32 (M, 3) vertex indices."""
+    tris = mesh.loop_triangles
+    out = np.empty(len(tris) * 3, np.uint32)
+    tris.foreach_get("vertices", out)
+    return out.reshape(-1, 3)
+
+
+def positions_of(mesh, count=None) -> np.ndarray:
+    """Vertex positions (V, 3) float32 in the mesh's local space; the first `count` only."""
+    out = np.empty(len(mesh.vertices) * 3, np.float32)
+    mesh.vertices.foreach_get("co", out)
+    out = out.reshape(-1, 3)
+    return out if count is None else out[:count]
+
+
+def to_world(points, matrix) -> np.ndarray:
+    m = np.asarray(matrix, np.float32)
+    return np.ascontiguousarray(points @ m[:3, :3].T + m[:3, 3], dtype=np.float32)
+
+
+def check_computable(obj):
+    """Raise SkipObject when the object cannot be computed at all."""
+    if obj.type != "MESH":
+        raise SkipObject(f"{obj.name}: not a mesh")
+    if obj.mode == "EDIT":
+        raise SkipObject(f"{obj.name}: skipped while in Edit Mode")
+    if len(obj.data.polygons) == 0:
+        raise SkipObject(f"{obj.name}: the mesh has no faces, nothing can cast or receive shadows")
+    if obj.data.library is not None:
+        raise SkipObject(f"{obj.name}: the mesh is linked from a library and cannot take attributes")
+
+
+def _blocking_modifier(obj, render):
+    for mod in obj.modifiers:
+        enabled = mod.show_render if render else mod.show_viewport
+        if enabled and mod.type not in DEFORMING and mod.type not in PREFIX_KEEPING:
+            return mod
+    return None
+
+
+def read_evaluated(obj, depsgraph):
+    """(vertices (V, 3) float32 world space, triangles (M, 3) uint32, None) of an object's
+    evaluated mesh on its original topology (see the module notes). Raises SkipObject."""
+    check_computable(obj)
+    original = obj.data
+    count = len(original.vertices)
+    obj_eval = obj.evaluated_get(depsgraph)
+    mesh_eval = obj_eval.data
+    if len(mesh_eval.vertices) != count:
+        blocker = _blocking_modifier(obj, depsgraph.mode == "RENDER")
+        if blocker is not None or len(mesh_eval.vertices) < count:
+            name = f"modifier '{blocker.name}' ({blocker.type})" if blocker else "a modifier"
+            raise SkipObject(f"{obj.name}: {name} changes the vertices in a way hemishadow cannot map back to "
+                             "the original mesh; move it below the result or apply it")
+    vertices = to_world(positions_of(mesh_eval, count), obj_eval.matrix_world)
+    return vertices, triangles_of(original), None
+
+
+def read_rest(obj):
+    """Positions (V, 3) float32 of the original (undeformed) mesh in world space: the rest pose
+    the solver builds its hierarchy from, the same whichever frame is computed first."""
+    return to_world(positions_of(obj.data), obj.matrix_world)
+
+
+def _attribute(mesh, name, data_type):
+    attr = mesh.attributes.get(name)
+    if attr is not None and (attr.data_type != data_type or attr.domain != "POINT"):
+        mesh.attributes.remove(attr)
+        attr = None
+    return attr or mesh.attributes.new(name, data_type, "POINT")
+
+
+def _set_display_color(mesh, name):
+    colors = mesh.color_attributes
+    if colors.active_color_name != name:
+        colors.active_color_name = name
+    if colors.default_color_name != name:
+        colors.default_color_name = name
+
+
+def write_outputs(obj, radiance, ao=None, transfer=None):
+    """Write per-vertex outputs onto the original mesh `obj.data` (geometry untouched):
+    radiance (V, 3) -> FLOAT_COLOR `hemishadow_radiance` (made the active and render color),
+    ao (V,) -> FLOAT `hemishadow_ao`, transfer (V, K) -> FLOAT `hemishadow_sh_00` ... `_{K-1}`.
+    Missing (None) outputs are left as they are."""
+    mesh = obj.data
+    rgba = np.ones((len(radiance), 4), np.float32)
+    rgba[:, :3] = radiance
+    _attribute(mesh, RADIANCE, "FLOAT_COLOR").data.foreach_set("color", rgba.ravel())
+    _set_display_color(mesh, RADIANCE)
+    if ao is not None:
+        _attribute(mesh, AO, "FLOAT").data.foreach_set("value", np.ascontiguousarray(ao, np.float32))
+    if transfer is not None:
+        columns = np.ascontiguousarray(np.asarray(transfer, np.float32).T)
+        for i, column in enumerate(columns):
+            _attribute(mesh, f"{SH_PREFIX}{i:02d}", "FLOAT").data.foreach_set("value", column)
+    # foreach_set does not tag the mesh: without this, modifiers after the deform ones
+    # (Subdivision) and renders would keep showing the previous values.
+    mesh.update_tag()
+
+
+def remove_sh_layers(obj, keep=0):
+    """Remove transfer layers with index >= keep (after a change of bands, or when not wanted)."""
+    attrs = obj.data.attributes
+    suffixes = {a.name: a.name[len(SH_PREFIX):] for a in attrs if a.name.startswith(SH_PREFIX)}
+    for name in [n for n, s in suffixes.items() if s.isdigit() and int(s) >= keep]:
+        attrs.remove(attrs[name])
+
+
+def clear_outputs(obj):
+    """Remove every `hemishadow_` attribute of the object's mesh; nothing else."""
+    attrs = obj.data.attributes
+    names = [a.name for a in attrs if a.name.startswith(PREFIX)]
+    for name in names:
+        attrs.remove(attrs[name])
+    if names:
+        obj.data.update_tag()
+    return len(names)

@@ -1,0 +1,111 @@
+"""UI: the "Hemishadow" tab of the 3D viewport sidebar and a panel in Object properties."""
+
+import bpy
+
+from . import engine_bridge
+
+
+class _Sidebar:
+    bl_space_type = "VIEW_3D"
+    bl_region_type = "UI"
+    bl_category = "Hemishadow"
+
+
+def draw_object_settings(layout, obj):
+    settings = obj.hemishadow
+    layout.prop(settings, "enabled")
+    column = layout.column()
+    column.active = settings.enabled
+    column.prop(settings, "brdf")
+    if settings.brdf == "PHONG":
+        column.prop(settings, "exponent")
+    column.prop(settings, "bands")
+    column.prop(settings, "albedo")
+    outputs = column.column(heading="Outputs", align=True)
+    outputs.label(text="Radiance: hemishadow_radiance", icon="COLOR")
+    outputs.prop(settings, "write_ao")
+    outputs.prop(settings, "write_sh")
+    if settings.status:
+        column.label(text=settings.status, icon="INFO")
+    timing = engine_bridge.last_timings.get(obj.name)
+    if timing:
+        column.label(text=f"{timing[0]} vertices: engine {timing[2] * 1e3:.0f} ms, Blender I/O {timing[1] * 1e3:.0f} ms")
+
+
+class HEMISHADOW_PT_lighting(_Sidebar, bpy.types.Panel):
+    bl_label = "Lighting"
+
+    def draw(self, context):
+        settings = context.scene.hemishadow
+        layout = self.layout
+        layout.use_property_split = True
+        layout.prop(settings, "lighting_source")
+        if settings.lighting_source != "UNIFORM":
+            layout.prop(settings, "hdri")
+        else:
+            layout.prop(settings, "uniform_color")
+        layout.prop(settings, "intensity")
+        layout.prop(settings, "rotation")
+        layout.prop(settings, "use_sun_lamps")
+        from . import world
+
+        layout.label(text=world.lighting_source(context.scene).label, icon="WORLD")
+
+
+class HEMISHADOW_PT_object(_Sidebar, bpy.types.Panel):
+    bl_label = "Object"
+
+    @classmethod
+    def poll(cls, context):
+        return context.active_object is not None and context.active_object.type == "MESH"
+
+    def draw(self, context):
+        self.layout.use_property_split = True
+        draw_object_settings(self.layout, context.active_object)
+
+
+class HEMISHADOW_PT_actions(_Sidebar, bpy.types.Panel):
+    bl_label = "Actions"
+
+    def draw(self, context):
+        layout = self.layout
+        live = context.scene.hemishadow.live
+        layout.operator("hemishadow.live_toggle", text="Live: On" if live else "Live: Off",
+                        icon="PAUSE" if live else "PLAY", depress=live)
+        layout.operator("hemishadow.compute", icon="SHADING_RENDERED")
+        row = layout.row(align=True)
+        row.operator("hemishadow.add_material", text="Emit Material").mode = "EMIT"
+        row.operator("hemishadow.add_material", text="Multiply Material").mode = "MULTIPLY"
+        layout.operator("hemishadow.bake_animation", icon="RENDER_ANIMATION")
+        row = layout.row(align=True)
+        row.operator("hemishadow.clear", icon="TRASH")
+        row.operator("hemishadow.clear_bake")
+
+
+class HEMISHADOW_PT_object_properties(bpy.types.Panel):
+    bl_label = "Hemishadow"
+    bl_space_type = "PROPERTIES"
+    bl_region_type = "WINDOW"
+    bl_context = "object"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    @classmethod
+    def poll(cls, context):
+        return context.object is not None and context.object.type == "MESH"
+
+    def draw(self, context):
+        self.layout.use_property_split = True
+        draw_object_settings(self.layout, context.object)
+
+
+classes = (HEMISHADOW_PT_lighting, HEMISHADOW_PT_object, HEMISHADOW_PT_actions, HEMISHADOW_PT_object_properties)
+
+
+def register():
+    for cls in classes:
+        bpy.utils.register_class(cls)
+
+
+def unregister():
+    for cls in reversed(classes):
+        bpy.utils.unregister_class(cls)

@@ -1,0 +1,124 @@
+"""Settings stored in the .blend: `Scene.hemishadow` and `Object.hemishadow`.
+
+What `world.scene_lighting(scene, bands)` reads from `scene.hemishadow`
+(a `HemishadowSceneSettings`):
+- `lighting_source`: 'WORLD' (the World's Environment Texture, its Mapping node rotation and
+  Background strength; falls back to `hdri` when the World has none), 'BUILTIN' (the HDRI
+  named by `hdri`) or 'UNIFORM' (a uniform sky of radiance 1).
+- `hdri`: name of one of the HDRIs that ship with Blender
+  (`hemishadow.environment.builtin_hdris()` keys, e.g. 'forest').
+- `uniform_color`: radiance of the uniform sky (RGB).
+- `intensity`: scale of the lighting radiance (>= 0).
+- `rotation`: rotation of the lighting about world +Z in radians, applied after the
+  World's own Mapping rotation.
+- `use_sun_lamps`: add the scene's sun lamps as soft SH lobes.
+Changing any of these re-shades the objects from their last transfer vectors
+(`engine_bridge.reshade_scene`), without recomputing transfer.
+
+`scene.hemishadow.live` switches the frame-change and depsgraph handlers on.
+"""
+
+import bpy
+from bpy.props import BoolProperty, EnumProperty, FloatProperty, FloatVectorProperty, PointerProperty, StringProperty
+
+
+def _lighting_changed(self, context):
+    from . import engine_bridge
+
+    engine_bridge.reshade_scene(context.scene)
+
+
+def _shading_changed(self, context):
+    from . import engine_bridge
+
+    engine_bridge.reshade_object(self.id_data, context.scene)
+
+
+def _live_changed(self, context):
+    if self.live:
+        from . import engine_bridge
+
+        engine_bridge.update_scene(context.scene, context.evaluated_depsgraph_get())
+
+
+# Enum items built by a callback must stay referenced, or Blender shows garbage names.
+_hdri_items = []
+
+
+def _hdri_enum(self, context):
+    if not _hdri_items:
+        try:
+            from hemishadow.environment import builtin_hdris
+
+            # Forest first: index 0 is a dynamic enum's default, and forest is the project's.
+            names = sorted(builtin_hdris(), key=lambda n: (n != "forest", n))
+        except (ImportError, OSError, ValueError):
+            names = []
+        _hdri_items.extend((n, n.title(), f"Blender's built-in '{n}' HDRI") for n in names or ["forest"])
+    return _hdri_items
+
+
+class HemishadowSceneSettings(bpy.types.PropertyGroup):
+    live: BoolProperty(
+        name="Live", default=False, update=_live_changed,
+        description="Recompute self-shadowing of enabled objects on every frame change and deformation")
+    lighting_source: EnumProperty(
+        name="Lighting", default="WORLD", update=_lighting_changed,
+        items=[("WORLD", "World", "The World's Environment Texture (falls back to the built-in HDRI)"),
+               ("BUILTIN", "Built-in HDRI", "One of the HDRIs that ship with Blender"),
+               ("UNIFORM", "Uniform Sky", "Constant radiance 1 from every direction")])
+    hdri: EnumProperty(name="HDRI", items=_hdri_enum, update=_lighting_changed,
+                       description="Built-in HDRI, used by 'Built-in HDRI' and when the World has no Environment Texture")
+    uniform_color: FloatVectorProperty(name="Sky Color", subtype="COLOR", size=3, default=(1.0, 1.0, 1.0), min=0.0,
+                                       update=_lighting_changed, description="Radiance of the uniform sky")
+    intensity: FloatProperty(name="Intensity", default=1.0, min=0.0, soft_max=10.0, update=_lighting_changed,
+                             description="Scale of the lighting's radiance")
+    rotation: FloatProperty(name="Rotation", default=0.0, subtype="ANGLE", unit="ROTATION", update=_lighting_changed,
+                            description="Rotation of the lighting about the world Z axis")
+    use_sun_lamps: BoolProperty(name="Sun Lamps", default=True, update=_lighting_changed,
+                                description="Add the scene's sun lamps as soft lobes of their angular diameter")
+
+
+class HemishadowObjectSettings(bpy.types.PropertyGroup):
+    enabled: BoolProperty(name="Enable", default=False,
+                          description="Compute self-shadowing of this object (live, Compute and Bake)")
+    brdf: EnumProperty(name="BRDF", default="DIFFUSE",
+                       items=[("DIFFUSE", "Diffuse", "Lambertian transfer, view independent"),
+                              ("PHONG", "Phong", "Normalised Phong lobe towards the active camera")])
+    exponent: FloatProperty(name="Exponent", default=16.0, min=0.0, soft_max=128.0,
+                            description="Phong exponent (sharper highlights when larger)")
+    bands: EnumProperty(name="SH Coefficients", default="25",
+                        items=[("9", "9", "3 bands: softest shadows, fastest"),
+                               ("16", "16", "4 bands"),
+                               ("25", "25", "5 bands: the paper's 4th order")])
+    albedo: FloatVectorProperty(name="Albedo", subtype="COLOR", size=3, default=(0.8, 0.8, 0.8), min=0.0, max=1.0,
+                                update=_shading_changed,
+                                description="Diffuse reflectance in the radiance (use white when a material multiplies "
+                                            "its own base color)")
+    write_ao: BoolProperty(name="Ambient Occlusion", default=True,
+                           description="Write the float point attribute hemishadow_ao")
+    write_sh: BoolProperty(name="SH Transfer Layers", default=False,
+                           description="Write the transfer coefficients as float point attributes hemishadow_sh_00, ...")
+    status: StringProperty(name="Status", default="", description="Outcome of the last computation")
+
+    @property
+    def band_count(self):
+        """SH bands l = 0..band_count-1 (3, 4 or 5), as the engine takes them."""
+        return {"9": 3, "16": 4, "25": 5}[self.bands]
+
+
+classes = (HemishadowSceneSettings, HemishadowObjectSettings)
+
+
+def register():
+    for cls in classes:
+        bpy.utils.register_class(cls)
+    bpy.types.Scene.hemishadow = PointerProperty(type=HemishadowSceneSettings)
+    bpy.types.Object.hemishadow = PointerProperty(type=HemishadowObjectSettings)
+
+
+def unregister():
+    del bpy.types.Object.hemishadow
+    del bpy.types.Scene.hemishadow
+    for cls in reversed(classes):
+        bpy.utils.unregister_class(cls)

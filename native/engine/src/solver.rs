@@ -1,0 +1,367 @@
+//! A per-mesh transfer solver for deforming meshes (Kautz et al. 2004, section 3.2).
+//!
+//! Built once from the topology and a rest pose, it keeps what does not change while the mesh
+//! deforms: the weld map, the two-level hierarchy (`hierarchy.rs`), the default offset and the
+//! quadrature. Each `solve` takes the frame's positions and refreshes cluster bounds, culls
+//! clusters below each receiver's horizon, and reuses the previous result of receivers whose
+//! blockers did not move.
+
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::Arc;
+
+use rayon::prelude::*;
+
+use crate::disk_mask::{disk, Mask};
+use crate::error::{Error, Result};
+use crate::hierarchy::{default_coarse_triangles, Hierarchy, GROUP};
+use crate::integrate::{Brdf, Quadrature};
+use crate::mesh::{check_finite, mean_edge_length, normalize, weld, welded_normals, Vec3};
+use crate::plane_table::PlaneTable;
+use crate::rasterizer::{above_horizon, dot, triangle_mask};
+use crate::sh::ShBasis;
+use crate::transfer::{check_brdf, default_downsample, Receiver, Settings, View};
+
+/// How the solver picks blockers.
+#[derive(Clone, Debug)]
+pub struct Blockers {
+    /// Use the two-level hierarchy; without it every fine triangle is a blocker.
+    pub hierarchy: bool,
+    /// Target size of the coarse mesh; None: `default_coarse_triangles`.
+    pub coarse_triangles: Option<usize>,
+    /// The k-ring (1 or 2) of fine triangles every receiver sees at full resolution.
+    pub ring: usize,
+    /// Skip clusters whose bounds lie below the receiver's horizon.
+    pub cull: bool,
+    /// Reuse the last result of receivers whose blockers did not move.
+    pub reuse: bool,
+}
+
+impl Default for Blockers {
+    fn default() -> Self {
+        Blockers { hierarchy: true, coarse_triangles: None, ring: 2, cull: true, reuse: true }
+    }
+}
+
+/// Counters of the last solve.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Stats {
+    /// Triangles above the horizon handed to the rasterizer per computed receiver (after
+    /// the hierarchy and culling).
+    pub blockers_per_receiver: f64,
+    pub computed: usize,
+    pub reused: usize,
+}
+
+struct LastFrame {
+    positions: Vec<Vec3>,
+    normals: Vec<Vec3>,
+    views: Option<Vec<Vec3>>,
+    group_bounds: Vec<[Vec3; 2]>,
+    transfer: Vec<f32>,
+}
+
+pub struct Solver {
+    remap: Vec<u32>,
+    first_copy: Vec<u32>,
+    fine: Vec<[u32; 3]>,
+    hierarchy: Hierarchy,
+    blockers: Blockers,
+    brdf: Brdf,
+    offset: f32,
+    table: Arc<PlaneTable>,
+    quadrature: Quadrature,
+    disk: Mask,
+    last: Option<LastFrame>,
+    stats: Stats,
+}
+
+/// One frame's data shared by the receivers.
+struct Frame<'a> {
+    positions: &'a [Vec3],
+    normals: &'a [Vec3],
+    views: Option<&'a [Vec3]>,
+    /// Bounding boxes of clusters, then of groups.
+    bounds: &'a [[Vec3; 2]],
+    group_bounds: &'a [[Vec3; 2]],
+}
+
+impl Solver {
+    pub fn new(rest: &[Vec3], triangles: &[[u32; 3]], settings: &Settings, blockers: Blockers) -> Result<Self> {
+        let basis = ShBasis::new(settings.bands)?;
+        check_brdf(settings.brdf)?;
+        let downsample = settings.downsample.unwrap_or(default_downsample(settings.brdf));
+        if !matches!(downsample, 1 | 2 | 4 | 8) {
+            return Err(Error::invalid(format!("downsample must be 1, 2, 4 or 8 cells, got {downsample}")));
+        }
+        if !matches!(blockers.ring, 1 | 2) {
+            return Err(Error::invalid(format!("ring must be 1 or 2, got {}", blockers.ring)));
+        }
+        let mesh = weld(rest, triangles)?;
+        if mesh.triangles.is_empty() {
+            return Err(Error::invalid("every triangle of the mesh is degenerate (repeats a vertex)"));
+        }
+        let offset = match settings.offset {
+            Some(o) if o.is_finite() && o >= 0.0 => o,
+            Some(o) => return Err(Error::invalid(format!("offset must be a finite, non-negative distance, got {o}"))),
+            None => 1e-3 * mean_edge_length(&mesh),
+        };
+        let coarse_target = blockers.coarse_triangles.unwrap_or(default_coarse_triangles(mesh.triangles.len()));
+        let hierarchy = Hierarchy::build(&mesh.positions, &mesh.triangles, coarse_target.max(1), blockers.ring);
+        let mut first_copy = vec![u32::MAX; mesh.positions.len()];
+        for (i, &w) in mesh.remap.iter().enumerate().rev() {
+            first_copy[w as usize] = i as u32;
+        }
+        Ok(Solver {
+            remap: mesh.remap,
+            first_copy,
+            fine: mesh.triangles,
+            hierarchy,
+            blockers,
+            brdf: settings.brdf,
+            offset,
+            table: PlaneTable::shared(settings.table_resolution)?,
+            quadrature: Quadrature::new(downsample, basis),
+            disk: disk(),
+            last: None,
+            stats: Stats::default(),
+        })
+    }
+
+    pub fn vertex_count(&self) -> usize {
+        self.remap.len()
+    }
+
+    pub fn coarse_triangles(&self) -> usize {
+        self.hierarchy.clusters()
+    }
+
+    pub fn coeffs(&self) -> usize {
+        self.quadrature.basis().coeffs()
+    }
+
+    pub fn stats(&self) -> Stats {
+        self.stats
+    }
+
+    /// Transfer vectors (bands^2 per input vertex) for this frame's positions.
+    pub fn solve(&mut self, vertices: &[Vec3], normals: Option<&[Vec3]>, view: Option<&View>) -> Result<Vec<f32>> {
+        if vertices.len() != self.remap.len() {
+            return Err(Error::invalid(format!(
+                "the solver was built for {} vertices, got {}: the topology changed, build a new solver",
+                self.remap.len(),
+                vertices.len()
+            )));
+        }
+        check_finite(vertices, "vertex")?;
+        let positions: Vec<Vec3> = self.first_copy.iter().map(|&i| vertices[i as usize]).collect();
+        let normals = welded_normals(&positions, &self.fine, &self.remap, normals)?;
+        let views = self.welded_views(view)?;
+        let bounds = self.cluster_bounds(&positions);
+        let group_bounds = self.group_bounds(&positions, &bounds);
+        let frame = Frame { positions: &positions, normals: &normals, views: views.as_deref(), bounds: &bounds, group_bounds: &group_bounds };
+        let reusable = self.reusable_receivers(&frame);
+        let k = self.coeffs();
+        let mut welded = vec![0.0f32; positions.len() * k];
+        let blockers = AtomicU64::new(0);
+        let reused = reusable.iter().filter(|&&r| r).count();
+        welded.par_chunks_mut(k).enumerate().for_each_init(Vec::new, |scratch, (r, out)| match (&self.last, reusable[r]) {
+            (Some(last), true) => out.copy_from_slice(&last.transfer[r * k..(r + 1) * k]),
+            _ => {
+                let count = self.receiver(r, &frame, scratch, out);
+                blockers.fetch_add(count, Ordering::Relaxed);
+            }
+        });
+        let computed = positions.len() - reused;
+        self.stats = Stats {
+            blockers_per_receiver: blockers.into_inner() as f64 / computed.max(1) as f64,
+            computed,
+            reused,
+        };
+        let result = self.remap.iter().flat_map(|&w| welded[w as usize * k..(w as usize + 1) * k].iter().copied()).collect();
+        if self.blockers.reuse {
+            self.last = Some(LastFrame { positions, normals, views, group_bounds, transfer: welded });
+        }
+        Ok(result)
+    }
+
+    fn welded_views(&self, view: Option<&View>) -> Result<Option<Vec<Vec3>>> {
+        let unit = |v: Vec3, what: &str| normalize(v).ok_or_else(|| Error::invalid(format!("{what} must be a finite, non-zero direction, got {v:?}")));
+        match (self.brdf, view) {
+            (Brdf::Diffuse, _) => Ok(None),
+            (Brdf::Phong { .. }, None) => Err(Error::invalid("a glossy BRDF needs a view direction")),
+            (_, Some(View::Direction(v))) => Ok(Some(vec![unit(*v, "view")?; self.first_copy.len()])),
+            (_, Some(View::PerVertex(views))) => {
+                if views.len() != self.remap.len() {
+                    return Err(Error::invalid(format!("view has {} rows but vertices has {}", views.len(), self.remap.len())));
+                }
+                self.first_copy.iter().map(|&i| unit(views[i as usize], "view")).collect::<Result<Vec<_>>>().map(Some)
+            }
+        }
+    }
+
+    /// Per cluster, the bounding box of the fine triangles it owns in this frame.
+    fn cluster_bounds(&self, positions: &[Vec3]) -> Vec<[Vec3; 2]> {
+        (0..self.hierarchy.clusters())
+            .map(|c| bounds_of(self.hierarchy.cluster_compact[c].vertices.iter().map(|&v| positions[v as usize])))
+            .collect()
+    }
+
+    /// Per group, the box around its clusters' boxes and its coarse triangles.
+    fn group_bounds(&self, positions: &[Vec3], clusters: &[[Vec3; 2]]) -> Vec<[Vec3; 2]> {
+        (0..self.hierarchy.groups())
+            .map(|g| {
+                let range = g * GROUP..((g + 1) * GROUP).min(clusters.len());
+                let corners = clusters[range].iter().flat_map(|b| [b[0], b[1]]);
+                let coarse = self.hierarchy.group_compact[g].vertices.iter().map(|&v| positions[v as usize]);
+                bounds_of(corners.filter(|p| p[0].is_finite()).chain(coarse))
+            })
+            .collect()
+    }
+
+    /// Receivers whose result cannot differ from the last frame's: same position, normal and
+    /// view, and every group of blockers that moved lies below its horizon in both frames
+    /// (so it contributed nothing then and contributes nothing now).
+    fn reusable_receivers(&self, frame: &Frame) -> Vec<bool> {
+        let n = frame.positions.len();
+        let Some(last) = self.last.as_ref().filter(|_| self.blockers.reuse) else { return vec![false; n] };
+        if last.views.as_deref() != frame.views {
+            return vec![false; n];
+        }
+        let moved: Vec<bool> = (0..n).map(|v| frame.positions[v] != last.positions[v] || frame.normals[v] != last.normals[v]).collect();
+        let h = &self.hierarchy;
+        let group_moved: Vec<bool> = (0..h.groups())
+            .map(|g| {
+                let clusters = g * GROUP..((g + 1) * GROUP).min(h.clusters());
+                h.group_compact[g].vertices.iter().any(|&v| moved[v as usize])
+                    || clusters.flat_map(|c| h.cluster_compact[c].vertices.iter()).any(|&v| moved[v as usize])
+            })
+            .collect();
+        let moved_groups: Vec<usize> = (0..h.groups()).filter(|&g| group_moved[g]).collect();
+        (0..n)
+            .into_par_iter()
+            .map(|r| {
+                if moved[r] {
+                    return false;
+                }
+                let Some(receiver) = Receiver::new(frame.positions[r], frame.normals[r], self.offset) else { return true };
+                moved_groups
+                    .iter()
+                    .all(|&g| below_horizon(&receiver, &frame.group_bounds[g]) && below_horizon(&receiver, &last.group_bounds[g]))
+            })
+            .collect()
+    }
+
+    /// Transfer of welded receiver `r` into `out`; returns the number of blockers rasterized.
+    /// The hot loop is compiled twice, for AVX2 + FMA and for the baseline, and picked at run time.
+    fn receiver(&self, r: usize, frame: &Frame, scratch: &mut Vec<Vec3>, out: &mut [f32]) -> u64 {
+        #[cfg(target_arch = "x86_64")]
+        if std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma") {
+            // SAFETY: the CPU supports the features the function is compiled for.
+            return unsafe { self.receiver_avx2(r, frame, scratch, out) };
+        }
+        self.receiver_portable(r, frame, scratch, out)
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    unsafe fn receiver_avx2(&self, r: usize, frame: &Frame, scratch: &mut Vec<Vec3>, out: &mut [f32]) -> u64 {
+        self.receiver_portable(r, frame, scratch, out)
+    }
+
+    #[inline(always)]
+    fn receiver_portable(&self, r: usize, frame: &Frame, scratch: &mut Vec<Vec3>, out: &mut [f32]) -> u64 {
+        let Some(receiver) = Receiver::new(frame.positions[r], frame.normals[r], self.offset) else {
+            out.fill(0.0);
+            return 0;
+        };
+        let h = &self.hierarchy;
+        let mut mask = Mask::EMPTY;
+        let mut rasterized = 0u64;
+        let r = r as u32;
+        let near = h.near_of(r as usize);
+        let mut next_near = 0;
+        scratch.resize(GROUP * 3 + h.largest_cluster_vertices, [0.0; 3]);
+        let (group_local, cluster_local) = scratch.split_at_mut(GROUP * 3);
+        'groups: for g in 0..h.groups() {
+            let first = g * GROUP;
+            if self.blockers.cull && below_horizon(&receiver, &frame.group_bounds[g]) {
+                while next_near < near.len() && (near[next_near] as usize) < first + GROUP {
+                    next_near += 1;
+                }
+                continue;
+            }
+            let group = &h.group_compact[g];
+            if self.blockers.hierarchy {
+                to_local_all(&receiver, frame.positions, &group.vertices, &mut group_local[..group.vertices.len()]);
+            }
+            for (i, c) in (first..(first + GROUP).min(h.clusters())).enumerate() {
+                let is_near = next_near < near.len() && near[next_near] == c as u32;
+                next_near += is_near as usize;
+                if self.blockers.hierarchy && !is_near {
+                    if !group.welded[i].contains(&r) {
+                        let [a, b, cc] = group.triangles[i].map(|v| group_local[v as usize]);
+                        rasterized += self.rasterize(a, b, cc, &mut mask) as u64;
+                    }
+                    continue;
+                }
+                if self.blockers.cull && below_horizon(&receiver, &frame.bounds[c]) {
+                    continue;
+                }
+                let cluster = &h.cluster_compact[c];
+                let local = &mut cluster_local[..cluster.vertices.len()];
+                to_local_all(&receiver, frame.positions, &cluster.vertices, local);
+                for (tri, welded) in cluster.triangles.iter().zip(&cluster.welded) {
+                    if !welded.contains(&r) {
+                        let [a, b, cc] = tri.map(|v| local[v as usize]);
+                        rasterized += self.rasterize(a, b, cc, &mut mask) as u64;
+                    }
+                }
+            }
+            if mask == self.disk {
+                break 'groups;
+            }
+        }
+        let view = frame.views.map_or(receiver.frame.n, |v| v[r as usize]);
+        self.quadrature.integrate(&mask, &receiver.frame, self.brdf, view, out);
+        rasterized
+    }
+
+    /// ORs a triangle into the mask; true when it reached the rasterizer (above the horizon).
+    #[inline(always)]
+    fn rasterize(&self, a: Vec3, b: Vec3, c: Vec3, mask: &mut Mask) -> bool {
+        if !above_horizon(a, b, c) {
+            return false;
+        }
+        if let Some(covered) = triangle_mask(&self.table, a, b, c) {
+            mask.or_assign(&covered);
+        }
+        true
+    }
+}
+
+#[inline(always)]
+fn to_local_all(receiver: &Receiver, positions: &[Vec3], vertices: &[u32], out: &mut [Vec3]) {
+    for (o, &v) in out.iter_mut().zip(vertices) {
+        *o = receiver.to_local(positions[v as usize]);
+    }
+}
+
+fn bounds_of(points: impl Iterator<Item = Vec3>) -> [Vec3; 2] {
+    let mut b = [[f32::INFINITY; 3], [f32::NEG_INFINITY; 3]];
+    for p in points {
+        for a in 0..3 {
+            b[0][a] = b[0][a].min(p[a]);
+            b[1][a] = b[1][a].max(p[a]);
+        }
+    }
+    b
+}
+
+/// Whether a box lies entirely on or below the receiver's tangent plane.
+#[inline(always)]
+fn below_horizon(receiver: &Receiver, bounds: &[Vec3; 2]) -> bool {
+    let n = receiver.frame.n;
+    // The box corner farthest along n.
+    let top = [0, 1, 2].map(|a| if n[a] >= 0.0 { bounds[1][a] } else { bounds[0][a] });
+    dot(n, top) <= dot(n, receiver.origin)
+}

@@ -1,0 +1,136 @@
+"""`blender --background FILE.blend --command hemishadow ...`, called as Blender calls it.
+
+The bpy module does not parse --command, so these tests call the function the add-on
+registers with `bpy.utils.register_cli_command` (addon.cli.main) with argv lists, on the
+.blend file that is open, exactly as Blender would after loading FILE.blend.
+"""
+
+import pathlib
+import sys
+
+import numpy as np
+import pytest
+
+bpy = pytest.importorskip("bpy")
+
+ROOT = pathlib.Path(__file__).resolve().parents[2]
+FIGURE = ROOT.parent / "shared" / "data" / "rigged_figure.glb"
+
+
+@pytest.fixture(scope="module")
+def addon():
+    if str(ROOT) not in sys.path:
+        sys.path.insert(0, str(ROOT))
+    import addon as package
+
+    registered_here = not hasattr(bpy.types.Object, "hemishadow")
+    if registered_here:
+        package.register()
+    yield package
+    if registered_here:
+        package.unregister()
+
+
+@pytest.fixture
+def cli(addon):
+    assert addon.cli._handle is not None, "register() did not register the `hemishadow` command"
+    return addon.cli.main
+
+
+@pytest.fixture
+def blend(addon, tmp_path):
+    """figure.blend: the walking figure (`Proxy`, hemishadow not enabled) and a static Icosphere."""
+    if not FIGURE.is_file():
+        pytest.skip(f"{FIGURE} is missing")
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    bpy.ops.import_scene.gltf(filepath=str(FIGURE))
+    bpy.context.scene.hemishadow.lighting_source = "BUILTIN"
+    path = tmp_path / "figure.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    return path
+
+
+def reopen(path):
+    bpy.ops.wm.open_mainfile(filepath=str(path))
+    return bpy.context.scene
+
+
+def test_help(cli, capsys):
+    assert cli(["--help"]) == 0
+    out = capsys.readouterr().out
+    assert "--command hemishadow" in out and "compute" in out and "bake" in out
+    assert cli(["bake", "--help"]) == 0
+    out = capsys.readouterr().out
+    assert "--start" in out and "--pack" in out and "--cache-dir" in out
+
+
+def test_compute_one_frame_and_save(cli, blend, capsys):
+    assert cli(["compute", "--frame", "7", "--objects", "Proxy", "--save"]) == 0
+    out = capsys.readouterr().out
+    assert "Proxy: frame 7: 370 vertices" in out and "saved" in out
+    scene = reopen(blend)
+    obj = scene.objects["Proxy"]
+    assert scene.frame_current == 7
+    assert obj.hemishadow.enabled
+    ao = np.empty(len(obj.data.vertices), np.float32)
+    obj.data.attributes["hemishadow_ao"].data.foreach_get("value", ao)
+    assert 0 < ao.min() < ao.max() <= 1.0 + 1e-5
+    assert "hemishadow_radiance" in obj.data.color_attributes
+    # The untouched object stays untouched.
+    assert "hemishadow_radiance" not in scene.objects["Icosphere"].data.color_attributes
+
+
+def test_compute_without_save_leaves_the_file_alone(cli, blend):
+    before = blend.stat().st_mtime_ns
+    assert cli(["compute", "--objects", "Proxy"]) == 0
+    assert blend.stat().st_mtime_ns == before
+
+
+def test_bake_to_files_beside_the_blend(cli, addon, blend, capsys):
+    assert cli(["bake", "--start", "1", "--end", "4", "--objects", "Proxy", "Icosphere", "--save"]) == 0
+    out = capsys.readouterr().out
+    assert "baked 4/4 frames" in out and "Proxy: frames 1..4 -> //hemishadow_cache/Proxy.npz" in out
+    assert (blend.parent / "hemishadow_cache" / "Proxy.npz").is_file()
+    assert (blend.parent / "hemishadow_cache" / "Icosphere.npz").is_file()
+    scene = reopen(blend)
+    for name in ("Proxy", "Icosphere"):
+        assert addon.cache.is_valid(scene.objects[name], scene, 3)
+
+
+def test_bake_packed_and_to_a_chosen_folder(cli, addon, blend, tmp_path):
+    assert cli(["bake", "--start", "2", "--end", "3", "--objects", "Proxy", "--pack"]) == 0   # --pack saves
+    scene = reopen(blend)
+    assert addon.cache.PACKED_KEY in scene.objects["Proxy"]
+    assert addon.cache.is_valid(scene.objects["Proxy"], scene, 2)
+    folder = tmp_path / "elsewhere"
+    assert cli(["bake", "--start", "1", "--end", "2", "--cache-dir", str(folder), "--no-transfer"]) == 0
+    assert (folder / "Proxy.npz").is_file()   # Proxy is enabled now: the default selection
+    assert addon.cache.load(scene.objects["Proxy"]).transfer is None
+
+
+@pytest.mark.parametrize("argv, code, message", [
+    ([], 2, "a command is needed"),
+    (["frobnicate"], 2, "invalid choice: 'frobnicate'"),
+    (["compute", "--objects", "Nope"], 2, "no object 'Nope' in scene 'Scene'; mesh objects: Proxy, Icosphere"),
+    (["compute", "--objects", "Armature"], 2, "armature object, not a mesh: 'Armature'"),
+    (["compute"], 2, "no object has hemishadow enabled"),
+    (["bake", "--start", "x"], 2, "argument --start: invalid int value: 'x'"),
+    (["bake", "--start", "5", "--end", "1", "--objects", "Proxy"], 2, "--end 1 is before --start 5"),
+    (["bake", "--pack", "--cache-dir", "/tmp", "--objects", "Proxy"], 2, "not allowed with argument"),
+    (["compute", "--scene", "Nope", "--objects", "Proxy"], 2, "no scene named 'Nope'"),
+])
+def test_bad_arguments_give_a_message_and_a_non_zero_exit(cli, blend, capsys, argv, code, message):
+    assert cli(argv) == code
+    err = capsys.readouterr().err
+    assert message in err
+    assert err.startswith("blender --background FILE.blend --command hemishadow")
+
+
+def test_failures_exit_1_with_a_message(cli, capsys):
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    bpy.ops.mesh.primitive_cube_add()
+    # An unsaved file: the default cache folder (//) does not exist.
+    assert cli(["bake", "--start", "1", "--end", "2", "--objects", "Cube"]) == 1
+    assert "hemishadow: error: the .blend file is not saved" in capsys.readouterr().err
+    assert cli(["compute", "--objects", "Cube", "--save"]) == 1
+    assert "never been saved" in capsys.readouterr().err

@@ -1,0 +1,182 @@
+"""The built extension zip installs into the bpy module the way a user installs it.
+
+`scripts/build_extension.py --if-stale` builds dist/hemishadow-<version>-linux_x64.zip (or
+reuses it when it is newer than every input). Each test runs in its own Python process with
+BLENDER_USER_RESOURCES pointing at a temporary folder: the bpy module reads it when it is
+imported, so a process per test is the only way to start from an empty user configuration,
+and a real user's configuration is never touched.
+"""
+
+import json
+import os
+import pathlib
+import subprocess
+import sys
+import textwrap
+import tomllib
+import zipfile
+
+import pytest
+
+pytest.importorskip("bpy")  # the subprocesses import it; skip where it is not installed
+
+ROOT = pathlib.Path(__file__).resolve().parents[2]
+MODULE = "bl_ext.user_default.hemishadow"
+PYTHON = f"python{sys.version_info.major}.{sys.version_info.minor}"
+
+
+@pytest.fixture(scope="module")
+def package():
+    """Path of the built zip and the manifest it was built from."""
+    result = subprocess.run([sys.executable, str(ROOT / "scripts" / "build_extension.py"), "--if-stale"],
+                            capture_output=True, text=True)
+    assert result.returncode == 0, result.stdout + result.stderr
+    with open(ROOT / "blender_manifest.toml", "rb") as fh:
+        manifest = tomllib.load(fh)
+    (platform,) = manifest["platforms"]
+    path = ROOT / "dist" / f"{manifest['id']}-{manifest['version']}-{platform.replace('-', '_')}.zip"
+    assert path.is_file(), result.stdout
+    return path, manifest
+
+
+# Runs in a fresh process; prints one JSON line prefixed with RESULT.
+PRELUDE = """
+import json, os, sys
+import bpy, addon_utils
+
+MODULE = {module!r}
+
+def fail(error):
+    raise error
+
+def install():
+    result = bpy.ops.extensions.package_install_files(
+        filepath={zip!r}, repo="user_default", enable_on_install=True)
+    return sorted(result)
+
+def enabled():
+    return list(addon_utils.check(MODULE)) + [MODULE in bpy.context.preferences.addons]
+
+def operators():
+    return sorted(dir(bpy.ops.hemishadow))
+
+def report(**facts):
+    print("RESULT " + json.dumps(facts), flush=True)
+"""
+
+
+def run_blender(zip_path, body, user_resources):
+    """Run PRELUDE + body with the bpy module in a fresh process; the facts it reports."""
+    user_resources = pathlib.Path(user_resources)
+    # Blender puts the extensions' wheel folder ahead of the other site-packages only when it
+    # exists at start-up (as it does once any extension with wheels has been installed);
+    # created later, it goes to the end of sys.path, behind this environment's editable
+    # install of the engine. Creating it first tests what a user's Blender imports.
+    site = user_resources / "extensions" / ".local" / "lib" / PYTHON / "site-packages"
+    site.mkdir(parents=True, exist_ok=True)
+    script = PRELUDE.format(module=MODULE, zip=str(zip_path)) + textwrap.dedent(body)
+    env = dict(os.environ, BLENDER_USER_RESOURCES=str(user_resources))
+    result = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, env=env,
+                            cwd=user_resources, timeout=300)
+    output = result.stdout + result.stderr
+    assert result.returncode == 0, output
+    lines = [line for line in result.stdout.splitlines() if line.startswith("RESULT ")]
+    assert len(lines) == 1, output
+    return json.loads(lines[0][len("RESULT "):]), output
+
+
+def test_zip_holds_manifest_addon_and_wheels(package):
+    path, manifest = package
+    with zipfile.ZipFile(path) as archive:
+        names = set(archive.namelist())
+        inside = tomllib.loads(archive.read("blender_manifest.toml").decode())
+    assert "__init__.py" in names
+    assert not any("__pycache__" in n or n.endswith(".pyc") for n in names)
+    assert inside["id"] == "hemishadow" and inside["version"] == manifest["version"]
+    assert inside["license"] == ["SPDX:GPL-3.0-or-later"]
+    assert inside["platforms"] == ["linux-x64"]
+    wheels = inside["wheels"]
+    assert {w.removeprefix("./") for w in wheels} == {n for n in names if n.endswith(".whl")}
+    assert any(pathlib.Path(w).name.startswith("hemishadow-") and "-abi3-" in w for w in wheels)
+    assert any(pathlib.Path(w).name.startswith("openexr-") and "-cp311-" in w for w in wheels)
+    addon_files = {p.relative_to(ROOT / "addon").as_posix() for p in (ROOT / "addon").rglob("*.py")
+                   if "__pycache__" not in p.parts}
+    assert addon_files <= names
+
+
+def test_install_enables_the_extension(package, tmp_path):
+    facts, output = run_blender(package[0], """
+        before = enabled()
+        result = install()
+        report(before=before, result=result, after=enabled())
+    """, tmp_path)
+    assert facts["before"] == [False, False, False]
+    assert facts["after"] == [True, True, True], output
+    assert (tmp_path / "extensions" / "user_default" / "hemishadow" / "blender_manifest.toml").is_file()
+
+
+def test_engine_is_imported_from_the_extension_wheels(package, tmp_path):
+    facts, output = run_blender(package[0], """
+        install()
+        import hemishadow, hemishadow._native, OpenEXR
+        import numpy as np
+        light = hemishadow.sh_basis([[0, 0, 1]], 3)
+        report(engine=hemishadow.__file__, native=hemishadow._native.__file__, openexr=OpenEXR.__file__,
+               value=float(light[0, 2]))
+    """, tmp_path)
+    site = tmp_path / "extensions" / ".local" / "lib" / PYTHON / "site-packages"
+    for key in ("engine", "native", "openexr"):
+        assert pathlib.Path(facts[key]).is_relative_to(site), (key, facts[key], output)
+    assert facts["value"] == pytest.approx(0.488603, abs=1e-6)
+
+
+def test_operators_are_registered(package, tmp_path):
+    facts, output = run_blender(package[0], """
+        before = operators()
+        install()
+        report(before=before, after=operators())
+    """, tmp_path)
+    assert facts["before"] == []
+    assert facts["after"], output
+
+
+def test_disable_enable_disable_twice(package, tmp_path):
+    # handle_error=fail: addon_utils otherwise prints a failing register/unregister and goes on.
+    facts, output = run_blender(package[0], """
+        install()
+        states = [(enabled(), operators())]
+        for _ in range(2):
+            addon_utils.disable(MODULE, default_set=True, handle_error=fail)
+            states.append((enabled(), operators()))
+            addon_utils.enable(MODULE, default_set=True, handle_error=fail)
+            states.append((enabled(), operators()))
+            addon_utils.disable(MODULE, default_set=True, handle_error=fail)
+            states.append((enabled(), operators()))
+            addon_utils.enable(MODULE, default_set=True, handle_error=fail)
+            states.append((enabled(), operators()))
+        report(states=states)
+    """, tmp_path)
+    states = facts["states"]
+    registered = states[0][1]
+    assert states[0][0] == [True, True, True] and registered, output
+    for i, (state, ops) in enumerate(states[1:], start=1):
+        if i % 2:  # after a disable
+            assert state[1] is False and state[2] is False, (i, state, output)
+            assert ops == [], (i, ops)
+        else:
+            assert state == [True, True, True], (i, state, output)
+            assert ops == registered, (i, ops)
+    assert "Traceback" not in output, output
+
+
+def test_command_line_install(package, tmp_path):
+    # What `blender --command extension install-file -r user_default -e ZIP` runs: the bpy
+    # module does not parse --command, so the registered function is called with its argv.
+    facts, output = run_blender(package[0], """
+        import bl_pkg
+        code = bl_pkg.cli_extension(["install-file", "-r", "user_default", "-e", {zip!r}])
+        report(code=code, after=enabled(), operators=operators())
+    """.replace("{zip!r}", repr(str(package[0]))), tmp_path)
+    assert facts["code"] == 0, output
+    assert facts["after"] == [True, True, True], output
+    assert facts["operators"], output
