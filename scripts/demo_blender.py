@@ -3,18 +3,22 @@
     .venv/bin/python scripts/demo_blender.py --out out/demo
 
 Like Figure 1 of Kautz et al. 2004: a cloth simulation (a subdivided plane of 1,444 vertices
-with a Cloth modifier) drops onto an obstacle (Suzanne, smooth, Subdivision Surface after
-nothing that deforms). The script
+with a Cloth modifier) drops onto an obstacle (Suzanne, smooth, with a Subdivision Surface
+modifier: hemishadow computes on its 507 original vertices and the modifier interpolates).
+The script
 1. builds the scene and bakes the cloth simulation's point cache;
 2. lights it with the World's Environment Texture = Blender's "forest" HDRI;
 3. enables hemishadow on both objects, adds the one-click material, turns Live on;
 4. steps the frames with `scene.frame_set` (the live handlers compute every frame) and prints
    per-frame times: engine (transfer + shading) and Blender I/O (reading the evaluated mesh,
    writing the attributes), and frame_set as a whole;
-5. renders a few frames with Cycles (CPU) to PNG and saves the .blend.
+5. bakes the range into hemishadow caches (//hemishadow_cache/*.npz, see docs/baking.md);
+6. renders a few frames with Cycles (CPU) to PNG (the handlers copy the cached values) and
+   saves the .blend.
 
-The add-on is the repository's `addon/` package (imported directly, registered like an
-installed extension), unless `--installed` says to use the extension installed in `bpy`.
+The add-on is the repository's `addon/` package, imported as the package `hemishadow_addon`
+and registered as Blender registers an enabled extension (`--addon` points at another copy,
+for example the unpacked extension zip).
 """
 
 from __future__ import annotations

@@ -158,6 +158,10 @@ impl Quadrature {
 
     fn integrate_diffuse(&self, blocked: &Mask, frame: &Frame, out: &mut [f32]) {
         let k = self.basis.coeffs();
+        if *blocked == Mask::EMPTY {
+            unoccluded_diffuse(&self.basis, frame.n, out); // exact, and no rotation needed
+            return;
+        }
         let mut local = self.local_open;
         for (block, weights) in self.blocks.iter().zip(self.local_weights.chunks_exact(k)) {
             let pattern = self.pattern(blocked, block.row0, block.col0);
