@@ -90,3 +90,13 @@ def test_bad_input(spot):
         hemishadow.TransferSolver(v, t, coarse_triangles=0)
     with pytest.raises(ValueError, match="empty"):
         hemishadow.TransferSolver(np.zeros((0, 3)), np.zeros((0, 3), int))
+
+
+@pytest.mark.parametrize("name", ["spot.obj", "cesium_man.glb"])
+def test_state_per_vertex_is_under_a_kilobyte(name):
+    v, t = load(name)
+    solver = hemishadow.TransferSolver(v, t)
+    solver.solve(v)
+    per_vertex = solver.memory_bytes / solver.vertex_count
+    print(f"\n{name}: {per_vertex:.0f} bytes of solver state per vertex")
+    assert per_vertex <= 1024

@@ -171,6 +171,11 @@ impl PySolver {
     }
 
     #[getter]
+    fn memory_bytes(&self) -> usize {
+        self.inner.memory_bytes()
+    }
+
+    #[getter]
     fn coarse_triangles(&self) -> usize {
         self.inner.coarse_triangles()
     }

@@ -143,6 +143,25 @@ impl Solver {
         self.stats
     }
 
+    /// Bytes the solver keeps between frames, the shared plane table excepted.
+    pub fn memory_bytes(&self) -> usize {
+        use std::mem::size_of;
+        let h = &self.hierarchy;
+        let compact = |c: &crate::hierarchy::Compact| c.vertices.len() * 4 + c.triangles.len() * 24;
+        let last = self.last.as_ref().map_or(0, |l| {
+            (l.positions.len() + l.normals.len() + l.views.as_ref().map_or(0, Vec::len)) * size_of::<Vec3>()
+                + l.group_bounds.len() * 24
+                + l.transfer.len() * 4
+        });
+        (self.remap.len() + self.first_copy.len()) * 4
+            + self.fine.len() * 12
+            + h.coarse.len() * 12
+            + (h.owned_start.len() + h.owned.len() + h.near_start.len() + h.near.len()) * 4
+            + h.group_compact.iter().map(compact).sum::<usize>()
+            + h.cluster_compact.iter().map(compact).sum::<usize>()
+            + last
+    }
+
     /// Transfer vectors (bands^2 per input vertex) for this frame's positions.
     pub fn solve(&mut self, vertices: &[Vec3], normals: Option<&[Vec3]>, view: Option<&View>) -> Result<Vec<f32>> {
         if vertices.len() != self.remap.len() {

@@ -57,6 +57,12 @@ class TransferSolver:
         return self._solver.coarse_triangles
 
     @property
+    def memory_bytes(self):
+        """Bytes kept between frames (topology, hierarchy, last frame), the shared 12 MiB
+        plane table excepted."""
+        return self._solver.memory_bytes
+
+    @property
     def stats(self):
         """Last solve: {'blockers_per_vertex', 'computed', 'reused'}."""
         blockers, computed, reused = self._solver.stats()
