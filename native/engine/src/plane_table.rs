@@ -115,8 +115,22 @@ impl PlaneTable {
     /// Mask of the cells on the positive side of the plane through the origin with normal m.
     #[inline(always)]
     pub fn lookup(&self, m: [f32; 3]) -> &Mask {
-        // SAFETY-free: texel_of always returns an index below 6 * resolution^2.
+        // texel_of always returns an index below 6 * resolution^2.
         &self.masks[texel_of(m, self.resolution)]
+    }
+
+    /// Texel indices of `LANES` normals given as components (x, y, z), branch-free so that
+    /// the loop vectorises; pair with `mask_at`.
+    #[inline(always)]
+    pub fn texels<const LANES: usize>(&self, x: &[f32; LANES], y: &[f32; LANES], z: &[f32; LANES], out: &mut [u32; LANES]) {
+        for i in 0..LANES {
+            out[i] = texel_of([x[i], y[i], z[i]], self.resolution) as u32;
+        }
+    }
+
+    #[inline(always)]
+    pub fn mask_at(&self, texel: u32) -> &Mask {
+        &self.masks[texel as usize]
     }
 }
 

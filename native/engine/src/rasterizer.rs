@@ -51,6 +51,72 @@ pub fn triangle_mask(table: &PlaneTable, a: [f32; 3], b: [f32; 3], c: [f32; 3]) 
     Some(Mask::and3(table.lookup(ab), table.lookup(bc), table.lookup(ca)))
 }
 
+/// Blocker triangles queued in structure-of-arrays form, rasterized `LANES` at a time so that
+/// the edge planes, the flat-cone test and the table indices of a batch are computed with
+/// vector instructions (Embree-style SoA packets); only the table fetches stay scalar.
+pub struct TriangleBatch {
+    /// Corner k, component j, lane i: `corners[k][j][i]`.
+    corners: [[[f32; LANES]; 3]; 3],
+    len: usize,
+}
+
+pub const LANES: usize = 8;
+
+impl Default for TriangleBatch {
+    fn default() -> Self {
+        TriangleBatch { corners: [[[0.0; LANES]; 3]; 3], len: 0 }
+    }
+}
+
+impl TriangleBatch {
+    /// Queues a triangle (local coordinates, at least one corner above the horizon); flushes
+    /// into `mask` when the batch is full.
+    #[inline(always)]
+    pub fn push(&mut self, table: &PlaneTable, a: [f32; 3], b: [f32; 3], c: [f32; 3], mask: &mut Mask) {
+        let i = self.len;
+        for j in 0..3 {
+            self.corners[0][j][i] = a[j];
+            self.corners[1][j][i] = b[j];
+            self.corners[2][j][i] = c[j];
+        }
+        self.len += 1;
+        if self.len == LANES {
+            self.flush(table, mask);
+        }
+    }
+
+    /// Rasterizes the queued triangles into `mask` and empties the batch.
+    #[inline(always)]
+    pub fn flush(&mut self, table: &PlaneTable, mask: &mut Mask) {
+        let [a, b, c] = &self.corners;
+        let mut planes = [[[0.0f32; LANES]; 3]; 3]; // edge ab, bc, ca; component; lane
+        let mut keep = [false; LANES];
+        for i in 0..LANES {
+            let (pa, pb, pc) = ([a[0][i], a[1][i], a[2][i]], [b[0][i], b[1][i], b[2][i]], [c[0][i], c[1][i], c[2][i]]);
+            let (ab, bc, ca) = (cross(pa, pb), cross(pb, pc), cross(pc, pa));
+            let det = dot(ab, pc);
+            let flip = if det < 0.0 { -1.0 } else { 1.0 };
+            keep[i] = det * det > FLAT_CONE_SQUARED * (dot(pa, pa) * dot(pb, pb) * dot(pc, pc));
+            for j in 0..3 {
+                planes[0][j][i] = flip * ab[j];
+                planes[1][j][i] = flip * bc[j];
+                planes[2][j][i] = flip * ca[j];
+            }
+        }
+        let mut texels = [[0u32; LANES]; 3];
+        for e in 0..3 {
+            table.texels(&planes[e][0], &planes[e][1], &planes[e][2], &mut texels[e]);
+        }
+        for i in 0..self.len {
+            if keep[i] {
+                let covered = Mask::and3(table.mask_at(texels[0][i]), table.mask_at(texels[1][i]), table.mask_at(texels[2][i]));
+                mask.or_assign(&covered);
+            }
+        }
+        self.len = 0;
+    }
+}
+
 /// ORs every triangle of `triangles` (local coordinates) into `mask`.
 pub fn rasterize(table: &PlaneTable, triangles: &[[[f32; 3]; 3]], mask: &mut Mask) {
     for [a, b, c] in triangles {

@@ -17,7 +17,7 @@ use crate::hierarchy::{default_coarse_triangles, Hierarchy, GROUP};
 use crate::integrate::{Brdf, Quadrature};
 use crate::mesh::{check_finite, mean_edge_length, normalize, weld, welded_normals, Vec3};
 use crate::plane_table::PlaneTable;
-use crate::rasterizer::{above_horizon, dot, triangle_mask};
+use crate::rasterizer::{above_horizon, dot, TriangleBatch};
 use crate::sh::ShBasis;
 use crate::transfer::{check_brdf, default_downsample, Receiver, Settings, View};
 
@@ -295,6 +295,7 @@ impl Solver {
         };
         let h = &self.hierarchy;
         let mut mask = Mask::EMPTY;
+        let mut batch = TriangleBatch::default();
         let mut rasterized = 0u64;
         let r = r as u32;
         let near = h.near_of(r as usize);
@@ -319,7 +320,7 @@ impl Solver {
                 if self.blockers.hierarchy && !is_near {
                     if !group.welded[i].contains(&r) {
                         let [a, b, cc] = group.triangles[i].map(|v| group_local[v as usize]);
-                        rasterized += self.rasterize(a, b, cc, &mut mask) as u64;
+                        rasterized += self.rasterize(&mut batch, a, b, cc, &mut mask) as u64;
                     }
                     continue;
                 }
@@ -332,7 +333,7 @@ impl Solver {
                 for (tri, welded) in cluster.triangles.iter().zip(&cluster.welded) {
                     if !welded.contains(&r) {
                         let [a, b, cc] = tri.map(|v| local[v as usize]);
-                        rasterized += self.rasterize(a, b, cc, &mut mask) as u64;
+                        rasterized += self.rasterize(&mut batch, a, b, cc, &mut mask) as u64;
                     }
                 }
             }
@@ -340,20 +341,19 @@ impl Solver {
                 break 'groups;
             }
         }
+        batch.flush(&self.table, &mut mask);
         let view = frame.views.map_or(receiver.frame.n, |v| v[r as usize]);
         self.quadrature.integrate(&mask, &receiver.frame, self.brdf, view, out);
         rasterized
     }
 
-    /// ORs a triangle into the mask; true when it reached the rasterizer (above the horizon).
+    /// Queues a triangle for the rasterizer unless it lies below the horizon; true if queued.
     #[inline(always)]
-    fn rasterize(&self, a: Vec3, b: Vec3, c: Vec3, mask: &mut Mask) -> bool {
+    fn rasterize(&self, batch: &mut TriangleBatch, a: Vec3, b: Vec3, c: Vec3, mask: &mut Mask) -> bool {
         if !above_horizon(a, b, c) {
             return false;
         }
-        if let Some(covered) = triangle_mask(&self.table, a, b, c) {
-            mask.or_assign(&covered);
-        }
+        batch.push(&self.table, a, b, c, mask);
         true
     }
 }
