@@ -7,7 +7,6 @@ attributes bit for bit, cancellation stops early without saving, and save/reload
 """
 
 import pathlib
-import sys
 import threading
 
 import numpy as np
@@ -17,21 +16,6 @@ bpy = pytest.importorskip("bpy")
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 FIGURE = ROOT.parent / "shared" / "data" / "rigged_figure.glb"
-
-
-@pytest.fixture(scope="module")
-def addon():
-    """The repository's add-on, registered once for the module (as `addon`)."""
-    if str(ROOT) not in sys.path:
-        sys.path.insert(0, str(ROOT))
-    import addon as package
-
-    registered_here = not hasattr(bpy.types.Object, "hemishadow")
-    if registered_here:
-        package.register()
-    yield package
-    if registered_here:
-        package.unregister()
 
 
 @pytest.fixture

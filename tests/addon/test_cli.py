@@ -6,7 +6,6 @@ registers with `bpy.utils.register_cli_command` (addon.cli.main) with argv lists
 """
 
 import pathlib
-import sys
 
 import numpy as np
 import pytest
@@ -15,20 +14,6 @@ bpy = pytest.importorskip("bpy")
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 FIGURE = ROOT.parent / "shared" / "data" / "rigged_figure.glb"
-
-
-@pytest.fixture(scope="module")
-def addon():
-    if str(ROOT) not in sys.path:
-        sys.path.insert(0, str(ROOT))
-    import addon as package
-
-    registered_here = not hasattr(bpy.types.Object, "hemishadow")
-    if registered_here:
-        package.register()
-    yield package
-    if registered_here:
-        package.unregister()
 
 
 @pytest.fixture
