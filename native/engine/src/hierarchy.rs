@@ -243,10 +243,3 @@ mod tests {
         }
     }
 }
-
-#[cfg(test)]
-mod size_report {
-    #[test]
-    #[ignore]
-    fn report_sizes() {}
-}

@@ -64,18 +64,53 @@ impl ShBasis {
     /// Writes Y_i(d) for a unit direction d into `out[..coeffs]`.
     #[inline]
     pub fn eval(&self, d: [f32; 3], out: &mut [f32]) {
-        // A constant band count lets the compiler unroll the recursions into straight code.
-        match self.bands {
-            3 => self.eval_bands::<3>(d, out),
-            4 => self.eval_bands::<4>(d, out),
-            5 => self.eval_bands::<5>(d, out),
-            _ => self.eval_any(d, out, self.bands),
+        if self.bands <= 5 {
+            // The hot case (the kernel evaluates 25 coefficients): straight-line code.
+            let mut all = [0.0f32; 25];
+            self.eval5(d, &mut all);
+            let k = self.bands * self.bands;
+            out[..k].copy_from_slice(&all[..k]);
+        } else {
+            self.eval_any(d, out, self.bands);
         }
     }
 
+    /// Bands 0..4 with the recursion of `eval_any` expanded: Q_lm(z) / sin^m for l <= 4.
     #[inline(always)]
-    fn eval_bands<const B: usize>(&self, d: [f32; 3], out: &mut [f32]) {
-        self.eval_any(d, out, B)
+    fn eval5(&self, [x, y, z]: [f32; 3], out: &mut [f32; 25]) {
+        let n = &self.norm;
+        let (c1, s1) = (x, y);
+        let (c2, s2) = (x * c1 - y * s1, x * s1 + y * c1);
+        let (c3, s3) = (x * c2 - y * s2, x * s2 + y * c2);
+        let (c4, s4) = (x * c3 - y * s3, x * s3 + y * c3);
+        let z2 = z * z;
+        // (l, m, Q_lm / sin^m): from the appendix's recursion, (1 - 2m) factors included.
+        let q = [
+            (0, 0, 1.0),
+            (1, 0, z),
+            (1, 1, -1.0),
+            (2, 0, 1.5 * z2 - 0.5),
+            (2, 1, -3.0 * z),
+            (2, 2, 3.0),
+            (3, 0, z * (2.5 * z2 - 1.5)),
+            (3, 1, 1.5 - 7.5 * z2),
+            (3, 2, 15.0 * z),
+            (3, 3, -15.0),
+            (4, 0, (35.0 * z2 * z2 - 30.0 * z2 + 3.0) / 8.0),
+            (4, 1, z * (7.5 - 17.5 * z2)),
+            (4, 2, 52.5 * z2 - 7.5),
+            (4, 3, -105.0 * z),
+            (4, 4, 105.0),
+        ];
+        let cos_m = [1.0, c1, c2, c3, c4];
+        let sin_m = [0.0, s1, s2, s3, s4];
+        for (l, m, qlm) in q {
+            let centre = l * (l + 1);
+            out[centre + m] = n[centre + m] * qlm * cos_m[m];
+            if m > 0 {
+                out[centre - m] = n[centre - m] * qlm * sin_m[m];
+            }
+        }
     }
 
     #[inline(always)]
@@ -157,6 +192,21 @@ mod tests {
         let expected = [PI, 2.0 * PI / 3.0, PI / 4.0, 0.0, -PI / 24.0];
         for (l, e) in expected.iter().enumerate() {
             assert!((clamped_cosine_zonal(l) - e).abs() < 1e-6, "l={l}");
+        }
+    }
+
+    #[test]
+    fn expanded_bands_match_the_recursion() {
+        let basis = ShBasis::new(5).unwrap();
+        for k in 0..50 {
+            let t = k as f32 * 0.37;
+            let d = crate::mesh::normalize([t.sin(), (1.3 * t).cos(), (0.7 * t).sin() - 0.2]).unwrap();
+            let (mut fast, mut slow) = ([0.0f32; 25], [0.0f32; 25]);
+            basis.eval(d, &mut fast);
+            basis.eval_any(d, &mut slow, 5);
+            for i in 0..25 {
+                assert!((fast[i] - slow[i]).abs() < 1e-5, "{i}: {} vs {}", fast[i], slow[i]);
+            }
         }
     }
 
