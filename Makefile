@@ -1,14 +1,21 @@
 # Entry points for a fresh machine: `make demo` and `make test` install everything first.
-.PHONY: setup demo test clean extension
+.PHONY: setup demo demo-cli test clean extension
 
 PY := .venv/bin/python
 
 setup:
 	bash scripts/setup.sh
 
-# The main job: spot.obj (ships in tests/assets) lit by Blender's "forest" HDRI
-# (ships with the bpy module), written to out/spot.glb and out/spot.npz.
+# The main job: build the extension zip (when stale), install it into the project's bpy
+# (user folder out/blender_user), and run the cloth demo through it: live self-shadowing
+# with per-frame times, Cycles renders in out/demo/ (scripts/demo_blender.py).
 demo: setup
+	$(PY) scripts/build_extension.py --if-stale
+	$(PY) scripts/demo_blender.py
+
+# The engine alone from the command line: spot.obj (ships in tests/assets) lit by Blender's
+# "forest" HDRI (ships with the bpy module), written to out/spot.glb and out/spot.npz.
+demo-cli: setup
 	$(PY) -m hemishadow transfer tests/assets/spot.obj --out out/spot
 
 # cargo first, so that pytest's summary is the run's closing line (cargo's last line

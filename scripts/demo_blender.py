@@ -1,14 +1,23 @@
-"""The Blender demo: cloth falling onto Suzanne, lit by a Blender HDRI, self-shadowed live.
+"""The Blender demo: cloth falling onto Suzanne, lit by a Blender HDRI, self-shadowed live,
+through the installed extension.
 
-    .venv/bin/python scripts/demo_blender.py --out out/demo
+    .venv/bin/python scripts/build_extension.py --if-stale   # dist/hemishadow-0.1.0-linux_x64.zip
+    .venv/bin/python scripts/demo_blender.py                  # or: make demo (does both)
 
 Like Figure 1 of Kautz et al. 2004: a cloth simulation (a subdivided plane of 1,444 vertices
 with a Cloth modifier) drops onto an obstacle (Suzanne, smooth, with a Subdivision Surface
 modifier: hemishadow computes on its 507 original vertices and the modifier interpolates).
 The script
+0. installs the extension zip into the project's `bpy` module the way a user does
+   (`bpy.ops.extensions.package_install_files`, enabled on install) into a project-local user
+   folder (out/blender_user, recreated every run: BLENDER_USER_RESOURCES is set before `bpy`
+   is imported, so a real user's Blender configuration is never touched), and checks that the
+   add-on is enabled and that the engine `hemishadow` is imported from the extension's
+   wheels, not from this environment;
 1. builds the scene and bakes the cloth simulation's point cache;
 2. lights it with the World's Environment Texture = Blender's "forest" HDRI;
-3. enables hemishadow on both objects, adds the one-click material, turns Live on;
+3. enables hemishadow on both objects, adds the one-click material
+   (`bpy.ops.hemishadow.add_material`), turns Live on (`bpy.ops.hemishadow.live_toggle`);
 4. steps the frames with `scene.frame_set` (the live handlers compute every frame) and prints
    per-frame times: engine (transfer + shading) and Blender I/O (reading the evaluated mesh,
    writing the attributes), and frame_set as a whole;
@@ -16,54 +25,90 @@ The script
 6. renders a few frames with Cycles (CPU) to PNG (the handlers copy the cached values) and
    saves the .blend.
 
-The add-on is the repository's `addon/` package, imported as the package `hemishadow_addon`
-and registered as Blender registers an enabled extension (`--addon` points at another copy,
-for example the unpacked extension zip).
+The add-on runs as Blender runs an installed extension: the package
+`bl_ext.user_default.hemishadow`, found in `sys.modules` once enabled.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
+import os
 import pathlib
+import shutil
 import sys
 import time
 
 import numpy as np
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
+ZIP = ROOT / "dist" / "hemishadow-0.1.0-linux_x64.zip"
+MODULE = "bl_ext.user_default.hemishadow"   # the add-on's package once installed in user_default
 
 
 def parse_args(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--out", default="out/demo", help="output folder (PNG frames, demo.blend)")
-    parser.add_argument("--frames", type=int, default=60, help="frames to simulate and shade (default 60)")
+    parser.add_argument("zip", nargs="?", default=str(ZIP),
+                        help=f"the extension zip to install (default {ZIP.relative_to(ROOT)})")
+    parser.add_argument("--out", default=str(ROOT / "out" / "demo"), help="output folder (PNG frames, demo.blend)")
+    parser.add_argument("--user-resources", default=str(ROOT / "out" / "blender_user"),
+                        help="Blender's user folder for this run, deleted and recreated (default out/blender_user)")
+    parser.add_argument("--frames", type=int, default=40, help="frames to simulate and shade (default 40)")
     parser.add_argument("--render", type=int, nargs="*", default=None,
                         help="frames to render (default: 4 spread over the range)")
-    parser.add_argument("--resolution", type=int, nargs=2, default=(640, 480), metavar=("X", "Y"))
+    parser.add_argument("--no-render", action="store_true", help="render nothing (a quick check)")
+    parser.add_argument("--resolution", type=int, nargs=2, default=(480, 360), metavar=("X", "Y"))
     parser.add_argument("--samples", type=int, default=16, help="Cycles samples (default 16)")
     parser.add_argument("--grid", type=int, default=38, help="cloth vertices per side (default 38: 1,444)")
     parser.add_argument("--hdri", default="forest", help="one of Blender's built-in HDRIs (default forest)")
-    parser.add_argument("--addon", default=str(ROOT / "addon"), help="the add-on package folder (default: addon/)")
     return parser.parse_args(argv)
 
 
-def load_addon(folder):
-    """Register the add-on package in `folder` as `hemishadow_addon`, as an installed extension is."""
-    import importlib.util
+# -- installing the extension ------------------------------------------------------------------
 
+def prepare_user_resources(folder):
+    """Point Blender at an empty user folder; must run before `bpy` is imported."""
+    if "bpy" in sys.modules:
+        raise SystemExit("demo_blender: bpy is already imported; BLENDER_USER_RESOURCES would be ignored")
+    folder = pathlib.Path(folder).resolve()
+    if folder.exists():
+        shutil.rmtree(folder)
+    # Blender puts the extensions' wheel folder ahead of the other site-packages only when it
+    # exists at start-up; created later (by the install), it goes to the end of sys.path,
+    # behind this environment's own build of the engine. A user's Blender, with the
+    # extension installed, starts with it present: create it first, as that start-up does.
+    site = (folder / "extensions" / ".local" / "lib" /
+            f"python{sys.version_info.major}.{sys.version_info.minor}" / "site-packages")
+    site.mkdir(parents=True)
+    os.environ["BLENDER_USER_RESOURCES"] = str(folder)
+    return folder, site
+
+
+def install_extension(zip_path, site):
+    """Install and enable the zip as a user does; the enabled add-on's module."""
+    import addon_utils
     import bpy
 
-    name = "hemishadow_addon"
-    if name in sys.modules:
-        return sys.modules[name]
-    folder = pathlib.Path(folder)
-    spec = importlib.util.spec_from_file_location(name, folder / "__init__.py", submodule_search_locations=[str(folder)])
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[name] = module
-    spec.loader.exec_module(module)
-    if not hasattr(bpy.types.Object, "hemishadow"):
-        module.register()
-    return module
+    zip_path = pathlib.Path(zip_path).resolve()
+    if not zip_path.is_file():
+        raise SystemExit(f"demo_blender: no extension zip at {zip_path} "
+                         f"(build it: .venv/bin/python scripts/build_extension.py)")
+    t0 = time.perf_counter()
+    bpy.ops.extensions.package_install_files(filepath=str(zip_path), repo="user_default", enable_on_install=True)
+    # The operator's return value is no proof: check what Blender itself reports.
+    loaded_default, loaded_state = addon_utils.check(MODULE)
+    if not (loaded_default and loaded_state and MODULE in bpy.context.preferences.addons):
+        raise SystemExit(f"demo_blender: {MODULE} is not enabled after installing {zip_path}")
+    import hemishadow
+    import hemishadow._native
+    for module in (hemishadow, hemishadow._native):
+        if not pathlib.Path(module.__file__).resolve().is_relative_to(site):
+            raise SystemExit(f"demo_blender: {module.__name__} was imported from {module.__file__}, "
+                             f"not from the extension's wheels in {site}")
+    addon = sys.modules[MODULE]
+    print(f"installed {zip_path.name} in {time.perf_counter() - t0:.1f} s: {MODULE} enabled "
+          f"({pathlib.Path(addon.__file__).parent}), engine from {pathlib.Path(hemishadow.__file__).parent}")
+    return addon
 
 
 # -- the scene ---------------------------------------------------------------------------------
@@ -72,7 +117,9 @@ def build_scene(grid: int, frames: int, hdri: str):
     import bpy
     from hemishadow.environment import builtin_hdris
 
-    bpy.ops.wm.read_factory_settings(use_empty=True)
+    # An empty scene; read_factory_settings would also reset the preferences and so
+    # disable the extension just installed.
+    bpy.ops.wm.read_homefile(use_empty=True)
     scene = bpy.context.scene
     scene.frame_start, scene.frame_end = 1, frames
     scene.render.fps = 24
@@ -138,10 +185,24 @@ def bake_cloth(scene, cloth):
     import bpy
 
     t0 = time.perf_counter()
-    with bpy.context.temp_override(scene=scene, active_object=cloth, object=cloth,
-                                   point_cache=cloth.modifiers["Cloth"].point_cache):
-        bpy.ops.ptcache.bake(bake=True)
+    with quiet_stdout(), bpy.context.temp_override(scene=scene, active_object=cloth, object=cloth,
+                                                   point_cache=cloth.modifiers["Cloth"].point_cache):
+        bpy.ops.ptcache.bake(bake=True)   # prints "bake: frame N :: M" for every frame
     return time.perf_counter() - t0
+
+
+@contextlib.contextmanager
+def quiet_stdout():
+    """Send what Blender's C code prints to stdout (file descriptor 1) to /dev/null."""
+    sys.stdout.flush()
+    saved = os.dup(1)
+    try:
+        with open(os.devnull, "w") as null:
+            os.dup2(null.fileno(), 1)
+        yield
+    finally:
+        os.dup2(saved, 1)
+        os.close(saved)
 
 
 def setup_render(scene, resolution, samples):
@@ -222,12 +283,18 @@ def main(argv=None):
     args = parse_args(argv)
     out = pathlib.Path(args.out).resolve()
     out.mkdir(parents=True, exist_ok=True)
+    # Outputs of an earlier run: a bake cache there would be used instead of computing live.
+    shutil.rmtree(out / "hemishadow_cache", ignore_errors=True)
+    if not args.no_render:
+        for old in out.glob("frame_*.png"):
+            old.unlink()
+    user, site = prepare_user_resources(args.user_resources)
 
     import bpy
 
-    addon = load_addon(args.addon)
-    engine_bridge = sys.modules[addon.__name__ + ".engine_bridge"]
-    bake = sys.modules[addon.__name__ + ".operators.bake"]
+    addon = install_extension(args.zip, site)
+    engine_bridge = sys.modules[MODULE + ".engine_bridge"]
+    bake = sys.modules[MODULE + ".operators.bake"]
 
     scene, cloth, suzanne, floor = build_scene(args.grid, args.frames, args.hdri)
     blend = out / "demo.blend"
@@ -246,9 +313,19 @@ def main(argv=None):
     floor_material(floor)
 
     print("live self-shadowing (scene.frame_set, handlers on):")
-    scene.hemishadow.live = True
+    scene.frame_set(scene.frame_start)
+    engine_bridge.last_timings.clear()
+    bpy.ops.hemishadow.live_toggle()   # switched on: computes the enabled objects at once
+    if not scene.hemishadow.live:
+        raise SystemExit("demo_blender: hemishadow.live_toggle did not switch Live on")
+    print(f"Live on at frame {scene.frame_start}, first computation: " + ", ".join(
+        f"{name} {t[0]} vertices, engine {t[2] * 1e3:.1f} ms, Blender I/O {t[1] * 1e3:.1f} ms"
+        for name, t in engine_bridge.last_timings.items()))
     rows = run_live(scene, objects, args.frames, engine_bridge)
     print_timings(rows, objects)
+    for obj in objects:
+        names = sorted(a.name for a in obj.data.attributes if a.name.startswith("hemishadow_"))
+        print(f"attributes of {obj.name}: {', '.join(names) or 'none'}")
 
     # Bake the same range, so the renders (and playback) copy from the cache.
     result = bake.bake_range(scene, objects, scene.frame_start, scene.frame_end)
@@ -256,15 +333,19 @@ def main(argv=None):
           f"Blender {result.blender_seconds:.2f} s -> " + ", ".join(result.saved.values()))
 
     setup_render(scene, args.resolution, args.samples)
-    frames = args.render if args.render is not None else [
-        scene.frame_start + round(i * (args.frames - 1) / 3) for i in range(4)]
+    if args.no_render:
+        frames = []
+    elif args.render is not None:
+        frames = args.render
+    else:
+        frames = sorted({scene.frame_start + round(i * (args.frames - 1) / 3) for i in range(4)})
     for frame in frames:
         scene.frame_set(frame)
         scene.render.filepath = str(out / f"frame_{frame:03d}.png")
         t0 = time.perf_counter()
         bpy.ops.render.render(write_still=True)
         print(f"rendered {scene.render.filepath} ({time.perf_counter() - t0:.1f} s, Cycles CPU, "
-              f"{args.samples} samples)")
+              f"{args.samples} samples, {args.resolution[0]}x{args.resolution[1]})")
     bpy.ops.wm.save_as_mainfile(filepath=str(blend))
     print(f"saved {blend}")
     return 0
