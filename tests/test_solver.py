@@ -100,3 +100,21 @@ def test_state_per_vertex_is_under_a_kilobyte(name):
     per_vertex = solver.memory_bytes / solver.vertex_count
     print(f"\n{name}: {per_vertex:.0f} bytes of solver state per vertex")
     assert per_vertex <= 1024
+
+
+def test_close_geometry_far_along_the_surface_is_seen_at_full_resolution():
+    """A rolled sheet: its turns are close in space but far apart along the surface, where a
+    k-ring alone would leave the coarse mesh cutting through them."""
+    from test_transfer_accuracy import rolled_sheet
+
+    v, t = rolled_sheet()
+    v = v.astype(np.float32)
+    exact = hemishadow.transfer(v, t)
+    lit = exact[:, 0] / hemishadow.AO_UNOCCLUDED >= 0.1
+    means = {}
+    for scale in (0.0, 1.5):
+        solver = hemishadow.TransferSolver(v, t, coarse_triangles=150, near_scale=scale)
+        means[scale] = relative_l2_errors(solver.solve(v), exact)[lit].mean()
+    print(f"\nrolled sheet vs exact, mean (AO>=0.1): ring only {means[0.0]:.4f}, near_scale 1.5 {means[1.5]:.4f}")
+    assert means[1.5] < 0.6 * means[0.0]
+    assert means[1.5] <= 0.05

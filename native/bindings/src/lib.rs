@@ -118,7 +118,7 @@ fn view_argument(view: Option<PyReadonlyArray1<f32>>, views: Option<PyReadonlyAr
 #[pymethods]
 impl PySolver {
     #[new]
-    #[pyo3(signature = (rest, triangles, bands, exponent, offset, table_resolution, downsample, hierarchy, coarse_triangles, ring, cull, reuse))]
+    #[pyo3(signature = (rest, triangles, bands, exponent, offset, table_resolution, downsample, hierarchy, coarse_triangles, ring, cull, reuse, near_scale))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -134,12 +134,13 @@ impl PySolver {
         ring: usize,
         cull: bool,
         reuse: bool,
+        near_scale: f32,
     ) -> PyResult<Self> {
         let rest = rows3(&rest, "rest_vertices")?;
         let triangles = triangles3(&triangles)?;
         let brdf = exponent.map_or(engine::Brdf::Diffuse, |exponent| engine::Brdf::Phong { exponent });
         let settings = engine::Settings { bands, brdf, view: None, offset, table_resolution, downsample };
-        let blockers = engine::Blockers { hierarchy, coarse_triangles, ring, cull, reuse };
+        let blockers = engine::Blockers { hierarchy, coarse_triangles, ring, cull, reuse, near_scale };
         let inner = run(py, || engine::Solver::new(&rest, &triangles, &settings, blockers))?;
         Ok(PySolver { inner })
     }

@@ -34,11 +34,14 @@ pub struct Blockers {
     pub cull: bool,
     /// Reuse the last result of receivers whose blockers did not move.
     pub reuse: bool,
+    /// Clusters whose centre lies within this many of their radii of a receiver are seen at
+    /// full resolution too: a coarse triangle that close cuts through the real surface.
+    pub near_scale: f32,
 }
 
 impl Default for Blockers {
     fn default() -> Self {
-        Blockers { hierarchy: true, coarse_triangles: None, ring: 2, cull: true, reuse: true }
+        Blockers { hierarchy: true, coarse_triangles: None, ring: 2, cull: true, reuse: true, near_scale: 1.5 }
     }
 }
 
@@ -82,6 +85,8 @@ struct Frame<'a> {
     views: Option<&'a [Vec3]>,
     /// Bounding boxes of clusters, then of groups.
     bounds: &'a [[Vec3; 2]],
+    /// Per cluster, the centre of its box and (near_scale x half its diagonal)^2.
+    spheres: &'a [[f32; 4]],
     group_bounds: &'a [[Vec3; 2]],
 }
 
@@ -177,7 +182,15 @@ impl Solver {
         let views = self.welded_views(view)?;
         let bounds = self.cluster_bounds(&positions);
         let group_bounds = self.group_bounds(&positions, &bounds);
-        let frame = Frame { positions: &positions, normals: &normals, views: views.as_deref(), bounds: &bounds, group_bounds: &group_bounds };
+        let spheres = self.near_spheres(&bounds);
+        let frame = Frame {
+            positions: &positions,
+            normals: &normals,
+            views: views.as_deref(),
+            bounds: &bounds,
+            spheres: &spheres,
+            group_bounds: &group_bounds,
+        };
         let reusable = self.reusable_receivers(&frame);
         let k = self.coeffs();
         let mut welded = vec![0.0f32; positions.len() * k];
@@ -222,6 +235,18 @@ impl Solver {
     fn cluster_bounds(&self, positions: &[Vec3]) -> Vec<[Vec3; 2]> {
         (0..self.hierarchy.clusters())
             .map(|c| bounds_of(self.hierarchy.cluster_compact[c].vertices.iter().map(|&v| positions[v as usize])))
+            .collect()
+    }
+
+    fn near_spheres(&self, bounds: &[[Vec3; 2]]) -> Vec<[f32; 4]> {
+        bounds
+            .iter()
+            .map(|[lo, hi]| {
+                let centre = [0, 1, 2].map(|a| 0.5 * (lo[a] + hi[a]));
+                let half_diagonal2 = [0, 1, 2].map(|a| 0.5 * (hi[a] - lo[a])).iter().map(|d| d * d).sum::<f32>();
+                let r2 = if half_diagonal2.is_finite() { half_diagonal2 * self.blockers.near_scale.powi(2) } else { -1.0 };
+                [centre[0], centre[1], centre[2], r2]
+            })
             .collect()
     }
 
@@ -315,8 +340,9 @@ impl Solver {
                 to_local_all(&receiver, frame.positions, &group.vertices, &mut group_local[..group.vertices.len()]);
             }
             for (i, c) in (first..(first + GROUP).min(h.clusters())).enumerate() {
-                let is_near = next_near < near.len() && near[next_near] == c as u32;
-                next_near += is_near as usize;
+                let in_ring = next_near < near.len() && near[next_near] == c as u32;
+                next_near += in_ring as usize;
+                let is_near = in_ring || close_to(&receiver, &frame.spheres[c]);
                 if self.blockers.hierarchy && !is_near {
                     if !group.welded[i].contains(&r) {
                         let [a, b, cc] = group.triangles[i].map(|v| group_local[v as usize]);
@@ -363,6 +389,12 @@ fn to_local_all(receiver: &Receiver, positions: &[Vec3], vertices: &[u32], out: 
     for (o, &v) in out.iter_mut().zip(vertices) {
         *o = receiver.to_local(positions[v as usize]);
     }
+}
+
+#[inline(always)]
+fn close_to(receiver: &Receiver, sphere: &[f32; 4]) -> bool {
+    let d = [0, 1, 2].map(|a| sphere[a] - receiver.origin[a]);
+    d[0] * d[0] + d[1] * d[1] + d[2] * d[2] < sphere[3]
 }
 
 fn bounds_of(points: impl Iterator<Item = Vec3>) -> [Vec3; 2] {

@@ -20,13 +20,16 @@ class TransferSolver:
     rest_vertices: (N, 3); triangles: (M, 3). bands, brdf, exponent, offset, downsample and
     table_resolution are those of `hemishadow.transfer` (the offset defaults to 1e-3 x the
     rest pose's mean edge length and then stays fixed).
+    near_scale: clusters whose centre lies within near_scale x their radius of a receiver are
+    seen at full resolution as well, whatever the surface distance (a coarse triangle that
+    close cuts through the real surface and would shadow falsely); 0 uses the ring only.
     hierarchy=False makes every fine triangle a blocker (the exact path of `transfer`, with
     culling and reuse); cull and reuse switch those optimisations.
     """
 
     def __init__(self, rest_vertices, triangles, *, bands=5, brdf="diffuse", exponent=None, offset=None,
                  downsample=None, table_resolution=_native.DEFAULT_TABLE_RESOLUTION, hierarchy=True,
-                 coarse_triangles=None, ring=2, cull=True, reuse=True):
+                 coarse_triangles=None, ring=2, near_scale=1.5, cull=True, reuse=True):
         from . import _brdf_arguments
 
         rest = _checks.points(rest_vertices, "rest_vertices")
@@ -38,6 +41,8 @@ class TransferSolver:
         exponent, _, _ = _brdf_arguments(brdf, exponent, [0.0, 0.0, 1.0], len(rest))
         if offset is not None and not (np.isfinite(offset) and offset >= 0):
             raise ValueError(f"offset must be a finite, non-negative distance, got {offset!r}")
+        if not (np.isfinite(near_scale) and near_scale >= 0):
+            raise ValueError(f"near_scale must be a finite, non-negative number, got {near_scale!r}")
         if coarse_triangles is not None and (int(coarse_triangles) != coarse_triangles or coarse_triangles < 1):
             raise ValueError(f"coarse_triangles must be a positive integer, got {coarse_triangles!r}")
         self.bands = _checks.band_count(bands)
@@ -45,7 +50,7 @@ class TransferSolver:
         self._solver = _native.Solver(rest, tris, self.bands, exponent, None if offset is None else float(offset),
                                       int(table_resolution), None if downsample is None else int(downsample),
                                       bool(hierarchy), None if coarse_triangles is None else int(coarse_triangles),
-                                      int(ring), bool(cull), bool(reuse))
+                                      int(ring), bool(cull), bool(reuse), float(near_scale))
 
     @property
     def vertex_count(self):
