@@ -100,12 +100,4 @@ class HEMISHADOW_PT_object_properties(bpy.types.Panel):
 
 classes = (HEMISHADOW_PT_lighting, HEMISHADOW_PT_object, HEMISHADOW_PT_actions, HEMISHADOW_PT_object_properties)
 
-
-def register():
-    for cls in classes:
-        bpy.utils.register_class(cls)
-
-
-def unregister():
-    for cls in reversed(classes):
-        bpy.utils.unregister_class(cls)
+register, unregister = bpy.utils.register_classes_factory(classes)
