@@ -68,6 +68,17 @@ pub fn weld(vertices: &[Vec3], triangles: &[[u32; 3]]) -> Result<WeldedMesh> {
     Ok(WeldedMesh { positions, triangles, remap })
 }
 
+impl WeldedMesh {
+    /// For every welded vertex, the first input vertex that welded into it.
+    pub fn first_copies(&self) -> Vec<u32> {
+        let mut first = vec![u32::MAX; self.positions.len()];
+        for (i, &w) in self.remap.iter().enumerate().rev() {
+            first[w as usize] = i as u32;
+        }
+        first
+    }
+}
+
 #[inline]
 pub fn normalize(v: Vec3) -> Option<Vec3> {
     let len = dot(v, v).sqrt();

@@ -15,11 +15,11 @@ use crate::disk_mask::{disk, Mask};
 use crate::error::{Error, Result};
 use crate::hierarchy::{default_coarse_triangles, Hierarchy, GROUP};
 use crate::integrate::{Brdf, Quadrature};
-use crate::mesh::{check_finite, mean_edge_length, normalize, weld, welded_normals, Vec3};
+use crate::mesh::{check_finite, weld, welded_normals, Vec3};
 use crate::plane_table::PlaneTable;
 use crate::rasterizer::{above_horizon, dot, TriangleBatch};
 use crate::sh::ShBasis;
-use crate::transfer::{check_brdf, default_downsample, Receiver, Settings, View};
+use crate::transfer::{check_brdf, checked_downsample, checked_offset, welded_views, Receiver, Settings, View};
 
 /// How the solver picks blockers.
 #[derive(Clone, Debug)]
@@ -94,10 +94,7 @@ impl Solver {
     pub fn new(rest: &[Vec3], triangles: &[[u32; 3]], settings: &Settings, blockers: Blockers) -> Result<Self> {
         let basis = ShBasis::new(settings.bands)?;
         check_brdf(settings.brdf)?;
-        let downsample = settings.downsample.unwrap_or(default_downsample(settings.brdf));
-        if !matches!(downsample, 1 | 2 | 4 | 8) {
-            return Err(Error::invalid(format!("downsample must be 1, 2, 4 or 8 cells, got {downsample}")));
-        }
+        let downsample = checked_downsample(settings)?;
         if !matches!(blockers.ring, 1 | 2) {
             return Err(Error::invalid(format!("ring must be 1 or 2, got {}", blockers.ring)));
         }
@@ -105,17 +102,10 @@ impl Solver {
         if mesh.triangles.is_empty() {
             return Err(Error::invalid("every triangle of the mesh is degenerate (repeats a vertex)"));
         }
-        let offset = match settings.offset {
-            Some(o) if o.is_finite() && o >= 0.0 => o,
-            Some(o) => return Err(Error::invalid(format!("offset must be a finite, non-negative distance, got {o}"))),
-            None => 1e-3 * mean_edge_length(&mesh),
-        };
+        let offset = checked_offset(settings.offset, &mesh)?;
         let coarse_target = blockers.coarse_triangles.unwrap_or(default_coarse_triangles(mesh.triangles.len()));
         let hierarchy = Hierarchy::build(&mesh.positions, &mesh.triangles, coarse_target.max(1), blockers.ring);
-        let mut first_copy = vec![u32::MAX; mesh.positions.len()];
-        for (i, &w) in mesh.remap.iter().enumerate().rev() {
-            first_copy[w as usize] = i as u32;
-        }
+        let first_copy = mesh.first_copies();
         Ok(Solver {
             remap: mesh.remap,
             first_copy,
@@ -179,7 +169,7 @@ impl Solver {
         check_finite(vertices, "vertex")?;
         let positions: Vec<Vec3> = self.first_copy.iter().map(|&i| vertices[i as usize]).collect();
         let normals = welded_normals(&positions, &self.fine, &self.remap, normals)?;
-        let views = self.welded_views(view)?;
+        let views = welded_views(&self.first_copy, self.remap.len(), self.brdf, view)?;
         let bounds = self.cluster_bounds(&positions);
         let group_bounds = self.group_bounds(&positions, &bounds);
         let spheres = self.near_spheres(&bounds);
@@ -214,21 +204,6 @@ impl Solver {
             self.last = Some(LastFrame { positions, normals, views, group_bounds, transfer: welded });
         }
         Ok(result)
-    }
-
-    fn welded_views(&self, view: Option<&View>) -> Result<Option<Vec<Vec3>>> {
-        let unit = |v: Vec3, what: &str| normalize(v).ok_or_else(|| Error::invalid(format!("{what} must be a finite, non-zero direction, got {v:?}")));
-        match (self.brdf, view) {
-            (Brdf::Diffuse, _) => Ok(None),
-            (Brdf::Phong { .. }, None) => Err(Error::invalid("a glossy BRDF needs a view direction")),
-            (_, Some(View::Direction(v))) => Ok(Some(vec![unit(*v, "view")?; self.first_copy.len()])),
-            (_, Some(View::PerVertex(views))) => {
-                if views.len() != self.remap.len() {
-                    return Err(Error::invalid(format!("view has {} rows but vertices has {}", views.len(), self.remap.len())));
-                }
-                self.first_copy.iter().map(|&i| unit(views[i as usize], "view")).collect::<Result<Vec<_>>>().map(Some)
-            }
-        }
     }
 
     /// Per cluster, the bounding box of the fine triangles it owns in this frame.

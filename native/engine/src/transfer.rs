@@ -83,18 +83,11 @@ struct Scene<'a> {
 pub fn transfer(vertices: &[Vec3], triangles: &[[u32; 3]], normals: Option<&[Vec3]>, settings: &Settings) -> Result<Output> {
     let basis = ShBasis::new(settings.bands)?;
     check_brdf(settings.brdf)?;
-    let downsample = settings.downsample.unwrap_or(default_downsample(settings.brdf));
-    if !matches!(downsample, 1 | 2 | 4 | 8) {
-        return Err(Error::invalid(format!("downsample must be 1, 2, 4 or 8 cells, got {downsample}")));
-    }
+    let downsample = checked_downsample(settings)?;
     let mesh = weld(vertices, triangles)?;
     let normals = welded_normals(&mesh.positions, &mesh.triangles, &mesh.remap, normals)?;
-    let views = welded_views(&mesh, settings)?;
-    let offset = match settings.offset {
-        Some(o) if o.is_finite() && o >= 0.0 => o,
-        Some(o) => return Err(Error::invalid(format!("offset must be a finite, non-negative distance, got {o}"))),
-        None => 1e-3 * mean_edge_length(&mesh),
-    };
+    let views = welded_views(&mesh.first_copies(), mesh.remap.len(), settings.brdf, settings.view.as_ref())?;
+    let offset = checked_offset(settings.offset, &mesh)?;
     let table = PlaneTable::shared(settings.table_resolution)?;
     let scene = Scene {
         mesh: &mesh,
@@ -126,24 +119,37 @@ pub(crate) fn check_brdf(brdf: Brdf) -> Result<()> {
     }
 }
 
-/// Unit view direction per welded vertex (the first copy's), for glossy BRDFs.
-pub(crate) fn welded_views(mesh: &WeldedMesh, settings: &Settings) -> Result<Option<Vec<Vec3>>> {
+/// The integration block size the settings ask for, or its default.
+pub(crate) fn checked_downsample(settings: &Settings) -> Result<usize> {
+    let downsample = settings.downsample.unwrap_or(default_downsample(settings.brdf));
+    if !matches!(downsample, 1 | 2 | 4 | 8) {
+        return Err(Error::invalid(format!("downsample must be 1, 2, 4 or 8 cells, got {downsample}")));
+    }
+    Ok(downsample)
+}
+
+/// The receivers' offset along the normal: as given, or 1e-3 x the mean edge length.
+pub(crate) fn checked_offset(offset: Option<f32>, mesh: &WeldedMesh) -> Result<f32> {
+    match offset {
+        Some(o) if o.is_finite() && o >= 0.0 => Ok(o),
+        Some(o) => Err(Error::invalid(format!("offset must be a finite, non-negative distance, got {o}"))),
+        None => Ok(1e-3 * mean_edge_length(mesh)),
+    }
+}
+
+/// Unit view direction per welded vertex (its first copy's), for glossy BRDFs; None for
+/// diffuse ones. `first_copy` maps welded vertices to input vertices.
+pub(crate) fn welded_views(first_copy: &[u32], input_count: usize, brdf: Brdf, view: Option<&View>) -> Result<Option<Vec<Vec3>>> {
     let unit = |v: Vec3, what: String| normalize(v).ok_or_else(|| Error::invalid(format!("{what} must be a finite, non-zero direction, got {v:?}")));
-    match (&settings.brdf, &settings.view) {
+    match (brdf, view) {
         (Brdf::Diffuse, _) => Ok(None),
         (Brdf::Phong { .. }, None) => Err(Error::invalid("a glossy BRDF needs a view direction")),
-        (_, Some(View::Direction(v))) => Ok(Some(vec![unit(*v, "view".into())?; mesh.positions.len()])),
+        (_, Some(View::Direction(v))) => Ok(Some(vec![unit(*v, "view".into())?; first_copy.len()])),
         (_, Some(View::PerVertex(views))) => {
-            if views.len() != mesh.remap.len() {
-                return Err(Error::invalid(format!("view has {} rows but vertices has {}", views.len(), mesh.remap.len())));
+            if views.len() != input_count {
+                return Err(Error::invalid(format!("view has {} rows but vertices has {input_count}", views.len())));
             }
-            let mut welded = vec![None; mesh.positions.len()];
-            for (i, (&w, v)) in mesh.remap.iter().zip(views).enumerate() {
-                if welded[w as usize].is_none() {
-                    welded[w as usize] = Some(unit(*v, format!("view {i}"))?);
-                }
-            }
-            Ok(Some(welded.into_iter().map(|v| v.unwrap_or([0.0, 0.0, 1.0])).collect()))
+            first_copy.iter().map(|&i| unit(views[i as usize], format!("view {i}"))).collect::<Result<Vec<_>>>().map(Some)
         }
     }
 }
@@ -220,15 +226,8 @@ pub fn visibility_mask(point: Vec3, normal: Vec3, vertices: &[Vec3], triangles: 
     }
     let mesh = weld(vertices, triangles)?;
     let table = PlaneTable::shared(table_resolution)?;
-    let (t, b) = tangent_frame(n);
-    let local: Vec<Vec3> = mesh
-        .positions
-        .iter()
-        .map(|v| {
-            let d = [v[0] - point[0], v[1] - point[1], v[2] - point[2]];
-            [dot(d, t), dot(d, b), dot(d, n)]
-        })
-        .collect();
+    let receiver = Receiver::new(point, n, 0.0).expect("a unit normal is non-zero");
+    let local: Vec<Vec3> = mesh.positions.iter().map(|v| receiver.to_local(*v)).collect();
     let mut mask = Mask::EMPTY;
     for tri in &mesh.triangles {
         let [a, b, c] = tri.map(|i| local[i as usize]);

@@ -35,7 +35,7 @@ __all__ = [
 #: T_0 of an unoccluded receiver (pi * Y_00); ambient occlusion is T_0 / AO_UNOCCLUDED.
 AO_UNOCCLUDED = float(np.pi * 0.28209479177387814)
 
-BRDFS = ("diffuse", "phong")
+BRDFS = _checks.BRDFS
 
 
 def sh_basis(directions, bands=5):
@@ -72,38 +72,17 @@ def transfer(vertices, triangles, normals=None, *, bands=5, brdf="diffuse", expo
     table_resolution: R of the 6 x R x R plane table (128 is the paper's 12 MiB table).
     Vertices touched by no triangle and with no usable normal get zeros and a warning.
     """
-    verts = _checks.points(vertices, "vertices")
-    tris = _checks.triangle_indices(triangles, len(verts))
-    if len(verts) == 0 or len(tris) == 0:
-        raise ValueError("the mesh is empty: it needs at least one vertex and one triangle")
+    verts, tris = _checks.mesh(vertices, triangles)
     norms = None if normals is None else _checks.float_array(normals, "normals", (len(verts), 3))
-    exponent, view_one, view_each = _brdf_arguments(brdf, exponent, view, len(verts))
-    if offset is not None and not (np.isfinite(offset) and offset >= 0):
-        raise ValueError(f"offset must be a finite, non-negative distance, got {offset!r}")
+    exponent = _checks.brdf_exponent(brdf, exponent)
+    view_one, view_each = _checks.view_arrays(brdf, view, len(verts))
     result, missing = _native.transfer(verts, tris, norms, _checks.band_count(bands), exponent, view_one, view_each,
-                                       None if offset is None else float(offset), int(table_resolution),
+                                       _checks.offset(offset), int(table_resolution),
                                        None if downsample is None else int(downsample))
     if missing:
         warnings.warn(f"{missing} vertices touch no triangle of non-zero area and have no normal: their transfer is zero",
                       RuntimeWarning, stacklevel=2)
     return result
-
-
-def _brdf_arguments(brdf, exponent, view, vertex_count):
-    if brdf not in BRDFS:
-        raise ValueError(f"brdf must be one of {BRDFS}, got {brdf!r}")
-    if brdf == "diffuse":
-        if exponent is not None:
-            raise ValueError("exponent applies to the phong BRDF only")
-        return None, None, None
-    if exponent is None or not np.isfinite(exponent) or exponent < 0:
-        raise ValueError(f"the phong BRDF needs a finite, non-negative exponent, got {exponent!r}")
-    if view is None:
-        raise ValueError("the phong BRDF needs a view direction: (3,) or one per vertex (N, 3)")
-    array = np.asarray(view)
-    if array.ndim == 1:
-        return float(exponent), _checks.float_array(array, "view", (3,)), None
-    return float(exponent), None, _checks.float_array(array, "view", (vertex_count, 3))
 
 
 def project_environment(image_or_path, bands=5, rotation=None):

@@ -38,6 +38,15 @@ def triangle_indices(values, vertex_count):
     return np.ascontiguousarray(array, dtype=np.uint32)
 
 
+def mesh(vertices, triangles, name="vertices"):
+    """Checked (vertices float32 (N, 3), triangles uint32 (M, 3)) of a non-empty mesh."""
+    verts = points(vertices, name)
+    tris = triangle_indices(triangles, len(verts))
+    if len(verts) == 0 or len(tris) == 0:
+        raise ValueError("the mesh is empty: it needs at least one vertex and one triangle")
+    return verts, tris
+
+
 def band_count(bands):
     if isinstance(bands, bool) or not isinstance(bands, (int, np.integer)) or not 1 <= bands <= 8:
         raise ValueError(f"bands must be an integer from 1 to 8 (3, 4, 5 give 9, 16, 25 coefficients), got {bands!r}")
@@ -53,3 +62,40 @@ def coefficient_matrix(values, name, rows=None):
     if rows is not None and array.shape[0] != rows:
         raise ValueError(f"{name} must have {rows} rows, got {array.shape[0]}")
     return array
+
+
+BRDFS = ("diffuse", "phong")
+
+
+def brdf_exponent(brdf, exponent):
+    """The Phong exponent as a float, or None for the diffuse BRDF."""
+    if brdf not in BRDFS:
+        raise ValueError(f"brdf must be one of {BRDFS}, got {brdf!r}")
+    if brdf == "diffuse":
+        if exponent is not None:
+            raise ValueError("exponent applies to the phong BRDF only")
+        return None
+    if exponent is None or not np.isfinite(exponent) or exponent < 0:
+        raise ValueError(f"the phong BRDF needs a finite, non-negative exponent, got {exponent!r}")
+    return float(exponent)
+
+
+def view_arrays(brdf, view, vertex_count):
+    """(one view (3,), per-vertex views (N, 3)): at most one is set, both None for diffuse."""
+    if brdf == "diffuse":
+        return None, None
+    if view is None:
+        raise ValueError("the phong BRDF needs a view direction: (3,) or one per vertex (N, 3)")
+    array = np.asarray(view)
+    if array.ndim == 1:
+        return float_array(array, "view", (3,)), None
+    return None, float_array(array, "view", (vertex_count, 3))
+
+
+def offset(value):
+    """The receivers' offset as a float, or None for the engine's default."""
+    if value is None:
+        return None
+    if not (np.isfinite(value) and value >= 0):
+        raise ValueError(f"offset must be a finite, non-negative distance, got {value!r}")
+    return float(value)

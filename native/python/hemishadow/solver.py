@@ -30,24 +30,15 @@ class TransferSolver:
     def __init__(self, rest_vertices, triangles, *, bands=5, brdf="diffuse", exponent=None, offset=None,
                  downsample=None, table_resolution=_native.DEFAULT_TABLE_RESOLUTION, hierarchy=True,
                  coarse_triangles=None, ring=2, near_scale=1.5, cull=True, reuse=True):
-        from . import _brdf_arguments
-
-        rest = _checks.points(rest_vertices, "rest_vertices")
-        tris = _checks.triangle_indices(triangles, len(rest))
-        if len(rest) == 0 or len(tris) == 0:
-            raise ValueError("the mesh is empty: it needs at least one vertex and one triangle")
-        if brdf not in ("diffuse", "phong"):
-            raise ValueError(f"brdf must be 'diffuse' or 'phong', got {brdf!r}")
-        exponent, _, _ = _brdf_arguments(brdf, exponent, [0.0, 0.0, 1.0], len(rest))
-        if offset is not None and not (np.isfinite(offset) and offset >= 0):
-            raise ValueError(f"offset must be a finite, non-negative distance, got {offset!r}")
+        rest, tris = _checks.mesh(rest_vertices, triangles, "rest_vertices")
+        exponent = _checks.brdf_exponent(brdf, exponent)
         if not (np.isfinite(near_scale) and near_scale >= 0):
             raise ValueError(f"near_scale must be a finite, non-negative number, got {near_scale!r}")
         if coarse_triangles is not None and (int(coarse_triangles) != coarse_triangles or coarse_triangles < 1):
             raise ValueError(f"coarse_triangles must be a positive integer, got {coarse_triangles!r}")
         self.bands = _checks.band_count(bands)
         self.brdf = brdf
-        self._solver = _native.Solver(rest, tris, self.bands, exponent, None if offset is None else float(offset),
+        self._solver = _native.Solver(rest, tris, self.bands, exponent, _checks.offset(offset),
                                       int(table_resolution), None if downsample is None else int(downsample),
                                       bool(hierarchy), None if coarse_triangles is None else int(coarse_triangles),
                                       int(ring), bool(cull), bool(reuse), float(near_scale))
@@ -81,13 +72,5 @@ class TransferSolver:
             raise ValueError(f"the solver was built for {self.vertex_count} vertices, got {len(verts)}: "
                              "the topology changed, build a new solver")
         norms = None if normals is None else _checks.float_array(normals, "normals", (len(verts), 3))
-        view_one = view_each = None
-        if self.brdf == "phong":
-            if view is None:
-                raise ValueError("the phong BRDF needs a view direction: (3,) or one per vertex (N, 3)")
-            array = np.asarray(view)
-            if array.ndim == 1:
-                view_one = _checks.float_array(array, "view", (3,))
-            else:
-                view_each = _checks.float_array(array, "view", (len(verts), 3))
+        view_one, view_each = _checks.view_arrays(self.brdf, view, len(verts))
         return self._solver.solve(verts, norms, view_one, view_each)
