@@ -39,16 +39,28 @@ def _live_objects(scene):
     return [o for o in engine_bridge.enabled_objects(scene) if not _cache_handled(o, scene)]
 
 
+def _live_and_idle(handler):
+    """Runs `handler(scene, depsgraph)` only while Live is on and no handler is running, and
+    marks one as running meanwhile (writing attributes triggers depsgraph updates)."""
+
+    def guarded(scene, depsgraph):
+        global _busy
+        if _busy or not scene.hemishadow.live:
+            return
+        _busy = True
+        try:
+            handler(scene, depsgraph)
+        finally:
+            _busy = False
+
+    guarded.__name__ = handler.__name__
+    return guarded
+
+
 @persistent
+@_live_and_idle
 def on_frame_change(scene, depsgraph):
-    global _busy
-    if _busy or not scene.hemishadow.live:
-        return
-    _busy = True
-    try:
-        _report(engine_bridge.update_scene(scene, depsgraph, _live_objects(scene)))
-    finally:
-        _busy = False
+    _report(engine_bridge.update_scene(scene, depsgraph, _live_objects(scene)))
 
 
 def _deformed_objects(scene, depsgraph):
@@ -63,19 +75,13 @@ def _lighting_updated(depsgraph):
 
 
 @persistent
+@_live_and_idle
 def on_depsgraph_update(scene, depsgraph):
-    global _busy
-    if _busy or not scene.hemishadow.live:
-        return
-    _busy = True
-    try:
-        objects = [o for o in _deformed_objects(scene, depsgraph) if not _cache_handled(o, scene)]
-        if objects:
-            _report(engine_bridge.update_scene(scene, depsgraph, objects))
-        if _lighting_updated(depsgraph):
-            engine_bridge.reshade_scene(scene)
-    finally:
-        _busy = False
+    objects = [o for o in _deformed_objects(scene, depsgraph) if not _cache_handled(o, scene)]
+    if objects:
+        _report(engine_bridge.update_scene(scene, depsgraph, objects))
+    if _lighting_updated(depsgraph):
+        engine_bridge.reshade_scene(scene)
 
 
 @persistent

@@ -18,10 +18,9 @@ bpy = pytest.importorskip("bpy")
 from mathutils import Vector  # noqa: E402  (comes with bpy)
 
 
-def render_radiance(exr_path, direction, rotation=None, tmp_path=None):
-    """Radiance Cycles shows along `direction` with `exr_path` as the World's environment."""
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    scene = bpy.context.scene
+def probe_camera(scene):
+    """Sets `scene` up to show, in a 2x2 EXR, the radiance along one direction: Cycles on
+    the CPU, no filter, no view transform, and a camera of about one degree."""
     scene.render.engine = "CYCLES"
     scene.cycles.device = "CPU"
     scene.cycles.samples = 4
@@ -30,6 +29,28 @@ def render_radiance(exr_path, direction, rotation=None, tmp_path=None):
     scene.render.resolution_x = scene.render.resolution_y = 2
     scene.view_settings.view_transform = "Standard"
     scene.render.image_settings.file_format = "OPEN_EXR"
+    camera = bpy.data.objects.new("cam", bpy.data.cameras.new("cam"))
+    camera.data.lens = 2000.0  # a ~1 degree field of view: one direction
+    scene.collection.objects.link(camera)
+    scene.camera = camera
+    camera.rotation_mode = "QUATERNION"
+    return camera
+
+
+def radiance_along(scene, camera, direction, tmp_path):
+    """The mean radiance Cycles renders with `camera` looking along `direction`."""
+    camera.rotation_quaternion = Vector(direction).to_track_quat("-Z", "Y")
+    out = tmp_path / "render.exr"
+    scene.render.filepath = str(out)
+    bpy.ops.render.render(write_still=True)
+    return hemishadow.environment.read_exr(out).reshape(-1, 3).mean(axis=0)
+
+
+def render_radiance(exr_path, direction, rotation=None, tmp_path=None):
+    """Radiance Cycles shows along `direction` with `exr_path` as the World's environment."""
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    camera = probe_camera(scene)
     world = bpy.data.worlds.new("env")
     scene.world = world
     world.use_nodes = True
@@ -44,16 +65,7 @@ def render_radiance(exr_path, direction, rotation=None, tmp_path=None):
         mapping.inputs["Rotation"].default_value = rotation
         links.new(coords.outputs["Generated"], mapping.inputs["Vector"])
         links.new(mapping.outputs["Vector"], env.inputs["Vector"])
-    camera = bpy.data.objects.new("cam", bpy.data.cameras.new("cam"))
-    camera.data.lens = 2000.0  # a ~1 degree field of view: one direction
-    scene.collection.objects.link(camera)
-    scene.camera = camera
-    camera.rotation_mode = "QUATERNION"
-    camera.rotation_quaternion = Vector(direction).to_track_quat("-Z", "Y")
-    out = tmp_path / "render.exr"
-    scene.render.filepath = str(out)
-    bpy.ops.render.render(write_still=True)
-    return hemishadow.environment.read_exr(out).reshape(-1, 3).mean(axis=0)
+    return radiance_along(scene, camera, direction, tmp_path)
 
 
 DIRECTIONS = [(1, 0, 0), (0, 1, 0), (-1, 0, 0), (0, -1, 0), (0.3, -0.5, 0.8), (-0.6, 0.2, -0.7)]

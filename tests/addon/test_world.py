@@ -123,6 +123,7 @@ def test_strength_and_rotation_agree_with_cycles(scene, tmp_path):
     exact and any mismatch is a mapping, rotation or strength error.
     """
     sys.path.insert(0, str(ROOT / "tests"))
+    from test_environment_blender import probe_camera, radiance_along
     from test_sh import equirect_directions  # the mapping Cycles was checked against
 
     rng = np.random.default_rng(11)
@@ -135,25 +136,10 @@ def test_strength_and_rotation_agree_with_cycles(scene, tmp_path):
     environment_world(scene, bpy.data.images.load(str(path)), rotation=(0.5, 0.1, -0.8), strength=1.5)
     lighting = world.scene_lighting(scene, 3, settings())
 
-    scene.render.engine = "CYCLES"
-    scene.cycles.device = "CPU"
-    scene.cycles.samples = 4
-    scene.cycles.use_denoising = False
-    scene.cycles.filter_width = 0.01
-    scene.render.resolution_x = scene.render.resolution_y = 2
-    scene.view_settings.view_transform = "Standard"
-    scene.render.image_settings.file_format = "OPEN_EXR"
-    camera = bpy.data.objects.new("cam", bpy.data.cameras.new("cam"))
-    camera.data.lens = 2000.0  # about one degree: one direction
-    scene.collection.objects.link(camera)
-    scene.camera = camera
-    camera.rotation_mode = "QUATERNION"
+    camera = probe_camera(scene)
     for direction in [(1, 0, 0), (-0.3, 0.5, 0.8)]:
         d = np.array(direction, float) / np.linalg.norm(direction)
-        camera.rotation_quaternion = Vector(d).to_track_quat("-Z", "Y")
-        scene.render.filepath = str(tmp_path / "render.exr")
-        bpy.ops.render.render(write_still=True)
-        shown = read_exr(tmp_path / "render.exr").reshape(-1, 3).mean(axis=0)
+        shown = radiance_along(scene, camera, d, tmp_path)
         expected = hemishadow.sh_basis([d], 3)[0] @ lighting
         assert shown == pytest.approx(expected, rel=0.01, abs=0.03), direction
 
