@@ -11,11 +11,13 @@ time (transfer, shading), per object, in `last_timings`.
 """
 
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass
 
 import numpy as np
 
 from . import mesh_io
+from . import objects as scope
 
 
 @dataclass
@@ -83,22 +85,40 @@ def _view_directions(obj, scene, vertices):
 def compute_object(obj, depsgraph, scene, *, force=False, lighting=None):
     """Transfer, AO and radiance of the object's evaluated mesh, as a Result; None when the
     positions (and view) are those of the last computation and `force` is false.
-    Raises mesh_io.SkipObject, or the engine's ValueError / RuntimeError."""
-    t0 = time.perf_counter()
-    vertices, triangles, normals = mesh_io.read_evaluated(obj, depsgraph)
-    view = _view_directions(obj, scene, vertices)
-    t1 = time.perf_counter()
-    entry = _solver_for(obj, vertices, triangles)
-    fingerprint = hash((vertices.tobytes(), None if view is None else view.tobytes()))
-    written = mesh_io.RADIANCE in obj.data.attributes  # gone after Clear, or undone
-    if not force and written and entry.transfer is not None and entry.fingerprint == fingerprint:
-        return None
-    entry.transfer, entry.fingerprint = None, None  # never keep a stale pair if solve raises
-    transfer = entry.solver.solve(vertices, normals, view)
-    entry.transfer, entry.fingerprint = transfer, fingerprint
-    result = _shade(obj, scene, transfer, lighting)
-    result.io_seconds, result.engine_seconds = t1 - t0, time.perf_counter() - t1
-    return result
+    Raises mesh_io.SkipObject, or the engine's ValueError / RuntimeError, each message
+    starting with the object's name."""
+    with named_errors(obj):
+        t0 = time.perf_counter()
+        vertices, triangles, normals = mesh_io.read_evaluated(obj, depsgraph)
+        view = _view_directions(obj, scene, vertices)
+        t1 = time.perf_counter()
+        entry = _solver_for(obj, vertices, triangles)
+        fingerprint = hash((vertices.tobytes(), None if view is None else view.tobytes()))
+        written = mesh_io.RADIANCE in obj.data.attributes  # gone after Clear, or undone
+        if not force and written and entry.transfer is not None and entry.fingerprint == fingerprint:
+            return None
+        entry.transfer, entry.fingerprint = None, None  # never keep a stale pair if solve raises
+        transfer = entry.solver.solve(vertices, normals, view)
+        entry.transfer, entry.fingerprint = transfer, fingerprint
+        result = _shade(obj, scene, transfer, lighting)
+        result.io_seconds, result.engine_seconds = t1 - t0, time.perf_counter() - t1
+        return result
+
+
+@contextmanager
+def named_errors(obj):
+    """Re-raise ValueError / RuntimeError (the engine's, Blender's) with the object's name in
+    front, so every message path says which object failed."""
+    try:
+        yield
+    except (ValueError, RuntimeError) as error:
+        if str(error).startswith(f"{obj.name}: "):
+            raise
+        try:
+            named = type(error)(f"{obj.name}: {error}")
+        except TypeError:  # an exception class with another constructor
+            named = RuntimeError(f"{obj.name}: {error}")
+        raise named from error
 
 
 def _shade(obj, scene, transfer, lighting=None):
@@ -115,6 +135,8 @@ def _write(obj, result):
     t0 = time.perf_counter()
     mesh_io.write_outputs(obj, result.radiance, result.ao if settings.write_ao else None,
                           result.transfer if settings.write_sh else None)
+    if not settings.write_ao:
+        mesh_io.remove_ao(obj)  # an AO left from earlier would no longer follow the shadows
     mesh_io.remove_sh_layers(obj, keep=result.transfer.shape[1] if settings.write_sh else 0)
     return time.perf_counter() - t0
 
@@ -125,11 +147,30 @@ def set_status(obj, message):
         obj.hemishadow.status = message
 
 
-def update_object(obj, depsgraph, scene, *, force=False, lighting=None):
+def _summary(obj, result):
+    if obj.hemishadow.brdf == "PHONG":
+        peak = float(result.radiance.max()) if len(result.radiance) else 0.0
+        return f"{len(result.ao)} vertices, radiance up to {peak:.2f} (Phong: no AO, it is a diffuse quantity)"
+    return f"{len(result.ao)} vertices, AO {float(result.ao.min()):.2f}..{float(result.ao.max()):.2f}"
+
+
+def _drop_stale(obj, error):
+    """The object stopped mapping onto its mesh: remove its outputs rather than let the last
+    ones render as if current, and say so."""
+    forget(obj)
+    removed = mesh_io.clear_outputs(obj)
+    return f"{error} (its hemishadow outputs were removed: they no longer matched)" if removed else str(error)
+
+
+def update_object(obj, depsgraph, scene, *, force=False, lighting=None, note=""):
     """Compute and write one object's outputs; returns the Result or None (nothing moved).
-    Errors are raised as by compute_object; the status line is set either way."""
+    Errors are raised as by compute_object; the status line is set either way (`note` is
+    appended to it on success)."""
     try:
         result = compute_object(obj, depsgraph, scene, force=force, lighting=lighting)
+    except mesh_io.TopologyChanged as error:
+        set_status(obj, _drop_stale(obj, error))
+        raise
     except (ValueError, RuntimeError) as error:
         set_status(obj, str(error))
         raise
@@ -137,28 +178,94 @@ def update_object(obj, depsgraph, scene, *, force=False, lighting=None):
         return None
     result.io_seconds += _write(obj, result)
     last_timings[obj.name] = (len(result.ao), result.io_seconds, result.engine_seconds)
-    set_status(obj, f"{len(result.ao)} vertices, AO {float(result.ao.min()):.2f}..{float(result.ao.max()):.2f}")
+    set_status(obj, _summary(obj, result) + note)
     return result
 
 
 def enabled_objects(scene):
-    return [o for o in scene.objects if o.type == "MESH" and o.hemishadow.enabled]
+    """The enabled mesh objects hemishadow computes: one per mesh (see objects.py)."""
+    return scope.owners(scene, [o for o in scene.objects if o.type == "MESH" and o.hemishadow.enabled])[0]
+
+
+#: name -> note on instances from the last full pass (Live switched on, Compute).
+_instance_notes: dict[str, str] = {}
+
+
+def scan_instances(scene, depsgraph):
+    """Look for enabled objects drawn through instances (a walk over every instance: on explicit
+    actions only); keeps the notes for the status of those computed and returns
+    {name: message} of those that cannot be (not in the scene), with their status set."""
+    import bpy
+
+    _instance_notes.clear()
+    refused = {}
+    for name, (computed, note) in scope.instance_notes(scene, depsgraph).items():
+        if computed:
+            _instance_notes[name] = note
+        else:
+            refused[name] = f"{name}: {note}"
+            set_status(bpy.data.objects[name], refused[name])
+    return refused
+
+
+def _note(obj, shared):
+    note = scope.owner_note(obj, shared)
+    instanced = _instance_notes.get(obj.name)
+    return note + (f"; {instanced}" if instanced else "")
 
 
 def update_scene(scene, depsgraph, objects=None, *, force=False):
     """update_object for each object (default: the enabled ones); returns {name: error message}
-    for those that failed, without raising."""
+    for those that were not computed, without raising. Of objects sharing a mesh only the owner
+    is computed (objects.py): the others asked for are returned with a message naming it.
+    By default (Live switched on) also reports enabled objects that are not meshes or that are
+    only instanced from outside the scene."""
     prune()
-    errors, lighting = {}, {}
-    for obj in enabled_objects(scene) if objects is None else objects:
+    errors = {}
+    if objects is None:
+        objects = [o for o in scene.objects if o.hemishadow.enabled]
+        errors.update(scan_instances(scene, depsgraph))
+    errors.update({o.name: mesh_io.not_a_mesh_message(o) for o in objects if o.type != "MESH"})
+    computed, followers = scope.owners(scene, objects)
+    errors.update(followers)
+    for obj in objects:
+        if obj.name in errors:
+            set_status(obj, errors[obj.name])
+    shared = scope.shared_users(scene, computed)
+    lighting = {}
+    for obj in computed:
         bands = obj.hemishadow.band_count
         try:
-            if bands not in lighting:
-                lighting[bands] = scene_lighting(scene, bands)
-            update_object(obj, depsgraph, scene, force=force, lighting=lighting[bands])
+            with named_errors(obj):
+                if bands not in lighting:
+                    lighting[bands] = scene_lighting(scene, bands)
+            update_object(obj, depsgraph, scene, force=force, lighting=lighting[bands], note=_note(obj, shared))
         except (ValueError, RuntimeError) as error:
             errors[obj.name] = str(error)
+            set_status(obj, str(error))
+        _mark_followers(obj, shared)
     return errors
+
+
+def compute_now(scene, depsgraph, objects=None):
+    """What the Compute Now operator does: update_scene forced on `objects` (default: every
+    enabled object), then (computed names, {name: error}, [warnings]); warnings name the
+    objects that show another's result (shared meshes) and the instances of computed objects."""
+    errors = update_scene(scene, depsgraph, objects, force=True)
+    asked = [o for o in scene.objects if o.hemishadow.enabled] if objects is None else objects
+    computed, followers = scope.owners(scene, asked)
+    shared = scope.shared_users(scene, computed)
+    warnings = [scope.sharing_warning(o, shared) for o in computed if o.name not in errors]
+    warnings += [f"{name}: {note}" for name, note in _instance_notes.items()]
+    for name in followers:
+        errors.pop(name, None)
+    return [o.name for o in computed if o.name not in errors], errors, [w for w in warnings if w]
+
+
+def _mark_followers(owner, shared):
+    for user in shared.get(owner.data.session_uid, ()):
+        if user.session_uid != owner.session_uid:
+            set_status(user, scope.follower_status(user, owner))
 
 
 def reshade_object(obj, scene, lighting=None):

@@ -44,6 +44,22 @@ class SkipObject(ValueError):
     message says why, for the status line."""
 
 
+class TopologyChanged(SkipObject):
+    """The evaluated mesh no longer maps onto the original vertices: outputs written before
+    describe another surface and must not keep rendering as if current."""
+
+
+# Object types with geometry that hemishadow refuses, and what to do about it.
+NOT_A_MESH = {"CURVE": "curve", "SURFACE": "surface", "META": "metaball", "FONT": "text", "CURVES": "hair curves",
+              "POINTCLOUD": "point cloud", "VOLUME": "volume", "GREASEPENCIL": "Grease Pencil"}
+
+
+def not_a_mesh_message(obj):
+    kind = NOT_A_MESH.get(obj.type, obj.type.lower())
+    return (f"{obj.name}: a {kind} object is not computed: hemishadow writes its results into a mesh's "
+            "attributes; convert it to a mesh (Object > Convert > Mesh) to compute it")
+
+
 def triangles_of(mesh) -> np.ndarray:
     """Loop triangles of a mesh as uint32 (M, 3) vertex indices."""
     tris = mesh.loop_triangles
@@ -65,10 +81,21 @@ def to_world(points, matrix) -> np.ndarray:
     return np.ascontiguousarray(points @ m[:3, :3].T + m[:3, 3], dtype=np.float32)
 
 
+def mirrors(matrix) -> bool:
+    """True when the matrix turns space inside out (an odd number of negative scales)."""
+    return float(np.linalg.det(np.asarray(matrix, np.float64)[:3, :3])) < 0.0
+
+
+def oriented(triangles, matrix) -> np.ndarray:
+    """Triangles wound for positions transformed by `matrix`: a mirroring matrix reverses the
+    winding, which would turn the area normals (the engine's surface side) inwards."""
+    return np.ascontiguousarray(triangles[:, ::-1]) if mirrors(matrix) else triangles
+
+
 def check_computable(obj):
     """Raise SkipObject when the object cannot be computed at all."""
     if obj.type != "MESH":
-        raise SkipObject(f"{obj.name}: not a mesh")
+        raise SkipObject(not_a_mesh_message(obj))
     if obj.mode == "EDIT":
         raise SkipObject(f"{obj.name}: skipped while in Edit Mode")
     if len(obj.data.polygons) == 0:
@@ -97,15 +124,18 @@ def read_evaluated(obj, depsgraph):
         blocker = _blocking_modifier(obj, depsgraph.mode == "RENDER")
         if blocker is not None or len(mesh_eval.vertices) < count:
             name = f"modifier '{blocker.name}' ({blocker.type})" if blocker else "a modifier"
-            raise SkipObject(f"{obj.name}: {name} changes the vertices in a way hemishadow cannot map back to "
-                             "the original mesh; move it below the result or apply it")
-    vertices = to_world(positions_of(mesh_eval, count), obj_eval.matrix_world)
-    return vertices, triangles_of(original), None
+            raise TopologyChanged(f"{obj.name}: {name} changes the vertices in a way hemishadow cannot map back "
+                                  "to the original mesh; move it below the result or apply it")
+    matrix = obj_eval.matrix_world
+    vertices = to_world(positions_of(mesh_eval, count), matrix)
+    return vertices, oriented(triangles_of(original), matrix), None
 
 
 def read_rest(obj):
     """Positions (V, 3) float32 of the original (undeformed) mesh in world space: the rest pose
-    the solver builds its hierarchy from, the same whichever frame is computed first."""
+    the solver builds its hierarchy from, the same whichever frame is computed first. Use it
+    with the triangles of `read_evaluated`, which are wound for the object's (mirroring or
+    not) matrix."""
     return to_world(positions_of(obj.data), obj.matrix_world)
 
 
@@ -129,8 +159,13 @@ def write_outputs(obj, radiance, ao=None, transfer=None):
     """Write per-vertex outputs onto the original mesh `obj.data` (geometry untouched):
     radiance (V, 3) -> FLOAT_COLOR `hemishadow_radiance` (made the active and render color),
     ao (V,) -> FLOAT `hemishadow_ao`, transfer (V, K) -> FLOAT `hemishadow_sh_00` ... `_{K-1}`.
-    Missing (None) outputs are left as they are."""
+    Missing (None) outputs are left as they are, except AO on a Phong object: AO is defined
+    by diffuse transfer (T_0 of a Phong lobe is not an occlusion), so it is never written
+    there and one left from a diffuse computation is removed."""
     mesh = obj.data
+    if obj.hemishadow.brdf == "PHONG":
+        ao = None
+        remove_ao(obj)
     rgba = np.ones((len(radiance), 4), np.float32)
     rgba[:, :3] = radiance
     _attribute(mesh, RADIANCE, "FLOAT_COLOR").data.foreach_set("color", rgba.ravel())
@@ -144,6 +179,12 @@ def write_outputs(obj, radiance, ao=None, transfer=None):
     # foreach_set does not tag the mesh: without this, modifiers after the deform ones
     # (Subdivision) and renders would keep showing the previous values.
     mesh.update_tag()
+
+
+def remove_ao(obj):
+    attr = obj.data.attributes.get(AO)
+    if attr is not None:
+        obj.data.attributes.remove(attr)
 
 
 def remove_sh_layers(obj, keep=0):

@@ -2,7 +2,11 @@
 
 import bpy
 
-from . import engine_bridge
+from . import engine_bridge, mesh_io
+from . import objects as scope
+
+# Objects the panels show: meshes, and the kinds hemishadow refuses (to say so).
+_SHOWN = {"MESH"} | set(mesh_io.NOT_A_MESH)
 
 
 class _Sidebar:
@@ -11,8 +15,11 @@ class _Sidebar:
     bl_category = "Hemishadow"
 
 
-def draw_object_settings(layout, obj):
+def draw_object_settings(layout, obj, scene):
     settings = obj.hemishadow
+    if obj.type != "MESH":
+        _draw_refused(layout, obj)
+        return
     layout.prop(settings, "enabled")
     column = layout.column()
     column.active = settings.enabled
@@ -23,13 +30,26 @@ def draw_object_settings(layout, obj):
     column.prop(settings, "albedo")
     outputs = column.column(heading="Outputs", align=True)
     outputs.label(text="Radiance: hemishadow_radiance", icon="COLOR")
-    outputs.prop(settings, "write_ao")
+    ao = outputs.row()
+    ao.active = settings.brdf != "PHONG"
+    ao.prop(settings, "write_ao")
+    if settings.brdf == "PHONG":
+        outputs.label(text="Phong: no AO (a diffuse quantity)", icon="INFO")
     outputs.prop(settings, "write_sh")
+    if scope.shared_users(scene, [obj]):
+        layout.operator("hemishadow.make_single_user", icon="USER")
     if settings.status:
         column.label(text=settings.status, icon="INFO")
     timing = engine_bridge.last_timings.get(obj.name)
     if timing:
         column.label(text=f"{timing[0]} vertices: engine {timing[2] * 1e3:.0f} ms, Blender I/O {timing[1] * 1e3:.0f} ms")
+
+
+def _draw_refused(layout, obj):
+    kind = mesh_io.NOT_A_MESH[obj.type]
+    layout.label(text=f"A {kind} object is not computed: convert it to a mesh", icon="ERROR")
+    if obj.hemishadow.enabled:  # enabled while it was a mesh, or from Python: let it be switched off
+        layout.prop(obj.hemishadow, "enabled")
 
 
 class HEMISHADOW_PT_lighting(_Sidebar, bpy.types.Panel):
@@ -57,11 +77,11 @@ class HEMISHADOW_PT_object(_Sidebar, bpy.types.Panel):
 
     @classmethod
     def poll(cls, context):
-        return context.active_object is not None and context.active_object.type == "MESH"
+        return context.active_object is not None and context.active_object.type in _SHOWN
 
     def draw(self, context):
         self.layout.use_property_split = True
-        draw_object_settings(self.layout, context.active_object)
+        draw_object_settings(self.layout, context.active_object, context.scene)
 
 
 class HEMISHADOW_PT_actions(_Sidebar, bpy.types.Panel):
@@ -91,11 +111,11 @@ class HEMISHADOW_PT_object_properties(bpy.types.Panel):
 
     @classmethod
     def poll(cls, context):
-        return context.object is not None and context.object.type == "MESH"
+        return context.object is not None and context.object.type in _SHOWN
 
     def draw(self, context):
         self.layout.use_property_split = True
-        draw_object_settings(self.layout, context.object)
+        draw_object_settings(self.layout, context.object, context.scene)
 
 
 classes = (HEMISHADOW_PT_lighting, HEMISHADOW_PT_object, HEMISHADOW_PT_actions, HEMISHADOW_PT_object_properties)

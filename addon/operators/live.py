@@ -6,6 +6,7 @@ reports it."""
 import bpy
 
 from .. import engine_bridge, material, mesh_io
+from .. import objects as scope
 
 _TARGETS = [("AUTO", "Auto", "Selected meshes when any are selected, else all enabled objects"),
             ("SELECTED", "Selected", "Selected mesh objects"),
@@ -13,10 +14,12 @@ _TARGETS = [("AUTO", "Auto", "Selected meshes when any are selected, else all en
 
 
 def target_objects(context, target):
-    selected = [o for o in context.selected_objects if o.type == "MESH"]
+    """The objects asked for, or None for every enabled object. Selected curves, text and the
+    like are included so that the report says why they are not computed."""
+    selected = [o for o in context.selected_objects if o.type == "MESH" or o.type in mesh_io.NOT_A_MESH]
     if target == "SELECTED" or (target == "AUTO" and selected):
         return selected
-    return engine_bridge.enabled_objects(context.scene)
+    return None
 
 
 class HEMISHADOW_OT_compute(bpy.types.Operator):
@@ -30,15 +33,16 @@ class HEMISHADOW_OT_compute(bpy.types.Operator):
 
     def execute(self, context):
         objects = target_objects(context, self.target)
-        if not objects:
+        if not (objects if objects is not None else [o for o in context.scene.objects if o.hemishadow.enabled]):
             self.report({"ERROR"}, "No mesh selected and no object has hemishadow enabled")
             return {"CANCELLED"}
-        errors = engine_bridge.update_scene(context.scene, context.evaluated_depsgraph_get(), objects, force=True)
-        if len(errors) == len(objects):
-            self.report({"ERROR"}, "; ".join(errors.values()))
+        computed, errors, warnings = engine_bridge.compute_now(context.scene, context.evaluated_depsgraph_get(),
+                                                               objects)
+        if not computed:
+            self.report({"ERROR"}, "; ".join(list(errors.values()) + warnings) or "Nothing was computed")
             return {"CANCELLED"}
-        if errors:
-            self.report({"WARNING"}, "; ".join(errors.values()))
+        if errors or warnings:
+            self.report({"WARNING"}, "; ".join(list(errors.values()) + warnings))
         return {"FINISHED"}
 
 
@@ -65,13 +69,45 @@ class HEMISHADOW_OT_clear(bpy.types.Operator):
     target: bpy.props.EnumProperty(name="Objects", items=_TARGETS, default="AUTO")
 
     def execute(self, context):
-        objects = [o for o in target_objects(context, self.target) if o.mode != "EDIT"]
+        objects = target_objects(context, self.target)
+        if objects is None:
+            objects = engine_bridge.enabled_objects(context.scene)
+        objects = [o for o in objects if o.type == "MESH" and o.mode != "EDIT"]
         removed = 0
         for obj in objects:
             removed += mesh_io.clear_outputs(obj)
             engine_bridge.forget(obj)  # the next computation must write again
             engine_bridge.set_status(obj, "")
         self.report({"INFO"}, f"Removed {removed} attributes from {len(objects)} objects")
+        return {"FINISHED"}
+
+
+class HEMISHADOW_OT_make_single_user(bpy.types.Operator):
+    """Give the enabled objects sharing this mesh meshes of their own (copies), so that each is
+    computed in its own pose and orientation"""
+
+    bl_idname = "hemishadow.make_single_user"
+    bl_label = "Make Single User"
+    bl_options = {"REGISTER", "UNDO"}
+
+    @classmethod
+    def poll(cls, context):
+        obj = context.object
+        return obj is not None and obj.type == "MESH" and bool(scope.shared_users(context.scene, [obj]))
+
+    def execute(self, context):
+        obj = context.object
+        users = scope.shared_users(context.scene, [obj]).get(obj.data.session_uid, [])
+        changed = scope.make_single_user(context.scene, obj)
+        if not changed:
+            self.report({"INFO"}, f"No enabled object shares the mesh of '{context.object.name}' with it")
+            return {"CANCELLED"}
+        enabled = [o for o in users if o.hemishadow.enabled]  # the copies, and the statuses of the rest
+        errors = engine_bridge.update_scene(context.scene, context.evaluated_depsgraph_get(), enabled, force=True)
+        if errors:
+            self.report({"WARNING"}, "; ".join(errors.values()))
+        names = ", ".join(f"'{o.name}'" for o in changed)
+        self.report({"INFO"}, f"Gave {names} meshes of their own")
         return {"FINISHED"}
 
 
@@ -102,4 +138,5 @@ class HEMISHADOW_OT_add_material(bpy.types.Operator):
         return {"FINISHED"}
 
 
-classes = (HEMISHADOW_OT_compute, HEMISHADOW_OT_live_toggle, HEMISHADOW_OT_clear, HEMISHADOW_OT_add_material)
+classes = (HEMISHADOW_OT_compute, HEMISHADOW_OT_live_toggle, HEMISHADOW_OT_clear, HEMISHADOW_OT_make_single_user,
+           HEMISHADOW_OT_add_material)
