@@ -158,8 +158,8 @@ def _drop_stale(obj, error):
     """The object stopped mapping onto its mesh: remove its outputs rather than let the last
     ones render as if current, and say so."""
     forget(obj)
-    removed = mesh_io.clear_outputs(obj)
-    return f"{error} (its hemishadow outputs were removed: they no longer matched)" if removed else str(error)
+    mesh_io.clear_outputs(obj)
+    return f"{error}; its hemishadow outputs are removed until it can be computed again (they would be stale)"
 
 
 def update_object(obj, depsgraph, scene, *, force=False, lighting=None, note=""):
@@ -169,8 +169,9 @@ def update_object(obj, depsgraph, scene, *, force=False, lighting=None, note="")
     try:
         result = compute_object(obj, depsgraph, scene, force=force, lighting=lighting)
     except mesh_io.TopologyChanged as error:
-        set_status(obj, _drop_stale(obj, error))
-        raise
+        message = _drop_stale(obj, error)
+        set_status(obj, message)
+        raise mesh_io.TopologyChanged(message) from error
     except (ValueError, RuntimeError) as error:
         set_status(obj, str(error))
         raise
@@ -265,6 +266,7 @@ def compute_now(scene, depsgraph, objects=None):
 def _mark_followers(owner, shared):
     for user in shared.get(owner.data.session_uid, ()):
         if user.session_uid != owner.session_uid:
+            forget(user)  # a former owner must not re-shade the shared mesh with its own transfer
             set_status(user, scope.follower_status(user, owner))
 
 

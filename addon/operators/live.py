@@ -33,13 +33,11 @@ class HEMISHADOW_OT_compute(bpy.types.Operator):
 
     def execute(self, context):
         objects = target_objects(context, self.target)
-        if not (objects if objects is not None else [o for o in context.scene.objects if o.hemishadow.enabled]):
-            self.report({"ERROR"}, "No mesh selected and no object has hemishadow enabled")
-            return {"CANCELLED"}
         computed, errors, warnings = engine_bridge.compute_now(context.scene, context.evaluated_depsgraph_get(),
                                                                objects)
         if not computed:
-            self.report({"ERROR"}, "; ".join(list(errors.values()) + warnings) or "Nothing was computed")
+            messages = list(errors.values()) + warnings
+            self.report({"ERROR"}, "; ".join(messages) or "No mesh selected and no object has hemishadow enabled")
             return {"CANCELLED"}
         if errors or warnings:
             self.report({"WARNING"}, "; ".join(list(errors.values()) + warnings))
