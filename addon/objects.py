@@ -105,30 +105,42 @@ def refused(scene):
             if o.type != "MESH" and o.hemishadow.enabled}
 
 
+def _hidden_enabled(scene):
+    """Enabled mesh objects that are not drawn themselves: outside the scene, or hidden or
+    excluded in the view layer. Only these can be visible through instances alone."""
+    import bpy
+
+    in_scene = {o.session_uid for o in scene.objects}
+    return {o.session_uid: o for o in bpy.data.objects if o.type == "MESH" and o.hemishadow.enabled
+            and (o.session_uid not in in_scene or not o.visible_get())}
+
+
 def instance_notes(scene, depsgraph) -> dict[str, tuple[bool, str]]:
-    """{name: (computed, note)} of enabled mesh objects drawn through instances (collection or
-    geometry nodes): whether they are computed (in the scene) and what the instances show.
-    Walks every instance: call it on explicit actions (Compute, Live switched on), not per frame."""
+    """{name: (computed, note)} of enabled mesh objects visible only through instances
+    (collection instances, geometry nodes, particles): whether they are computed (they are
+    when in the scene) and what the instances show. Walks the instances only when such an
+    object exists, since there can be millions."""
+    hidden = _hidden_enabled(scene)
+    if not hidden:
+        return {}
     instancers = {}
     for instance in depsgraph.object_instances:
-        if not instance.is_instance or instance.object is None:
-            continue
-        source = instance.object.original
-        if source.type == "MESH" and source.hemishadow.enabled:
-            parent = instance.parent.original.name if instance.parent else "?"
-            instancers.setdefault(source.name, (source, set()))[1].add(parent)
+        if instance.is_instance and instance.object is not None:
+            uid = instance.object.original.session_uid
+            if uid in hidden:
+                parent = instance.parent.original.name if instance.parent else "?"
+                instancers.setdefault(uid, set()).add(parent)
     in_scene = {o.session_uid for o in scene.objects}
     notes = {}
-    for name, (source, parents) in instancers.items():
-        by = _quoted(sorted(parents))
-        if source.session_uid not in in_scene:
-            notes[name] = (False, f"enabled but not in scene '{scene.name}', only instanced (by {by}): not computed; "
-                                  "link it into the scene (an excluded collection will do) to compute it")
-        elif not source.visible_get():
-            notes[name] = (True, f"visible only through instances (by {by}): they show its result, computed in its "
-                                 "own place and pose")
+    for uid, parents in instancers.items():
+        source, by = hidden[uid], _quoted(sorted(parents))
+        if uid not in in_scene:
+            notes[source.name] = (False, f"enabled but not in scene '{scene.name}', only instanced (by {by}): not "
+                                         "computed; link it into the scene (an excluded collection will do) to "
+                                         "compute it")
         else:
-            notes[name] = (True, f"its instances (by {by}) show this result, computed in its own place and pose")
+            notes[source.name] = (True, f"visible only through instances (by {by}): they show its result, computed "
+                                        "in its own place and pose")
     return notes
 
 
