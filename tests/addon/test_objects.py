@@ -104,13 +104,17 @@ def count_solves(monkeypatch):
 
 ROTATION = Euler((0.4, -1.1, 2.3)).to_matrix()
 TRANSFORMS = {
-    "mirror x": Matrix.Diagonal((-1, 1, 1)),
-    "mirror y": Matrix.Diagonal((1, -1, 1)),
-    "mirror z": Matrix.Diagonal((1, 1, -1)),
-    "mirror xy": Matrix.Diagonal((-1, -1, 1)),
-    "mirror xyz": Matrix.Diagonal((-1, -1, -1)),
-    "rotation": ROTATION,
-    "rotation, mirror y": ROTATION @ Matrix.Diagonal((1, -1, 1)),
+    "mirrors": {
+        "mirror x": Matrix.Diagonal((-1, 1, 1)),
+        "mirror y": Matrix.Diagonal((1, -1, 1)),
+        "mirror z": Matrix.Diagonal((1, 1, -1)),
+        "mirror xy": Matrix.Diagonal((-1, -1, 1)),
+        "mirror xyz": Matrix.Diagonal((-1, -1, -1)),
+    },
+    "rotations": {
+        "rotation": ROTATION,
+        "rotation, mirror y": ROTATION @ Matrix.Diagonal((1, -1, 1)),
+    },
 }
 
 
@@ -124,7 +128,7 @@ def compute_transformed(obj, root, base, linear):
     return attribute(obj, mesh_io.AO), sh_layers(obj)
 
 
-def check_invariance(obj, root):
+def check_invariance(obj, root, transforms):
     base = root.matrix_world.copy()
     ao0, transfer0 = compute_transformed(obj, root, base, Matrix.Identity(3))
     # Relative L2 per vertex, except that vectors shorter than 0.05 (an open vertex's is about
@@ -133,7 +137,7 @@ def check_invariance(obj, root):
     # still held to 0.02.
     norm0 = np.maximum(np.linalg.norm(transfer0, axis=1), 0.05)
     failures = []
-    for label, linear in TRANSFORMS.items():
+    for label, linear in transforms.items():
         ao, transfer = compute_transformed(obj, root, base, linear)
         # The transformed object's transfer is T0(M^T d): rotate it by M^T to compare with T0.
         back = hemishadow.rotate_sh(transfer.T, np.array(linear).T).T
@@ -147,17 +151,19 @@ def check_invariance(obj, root):
     assert not failures, "; ".join(failures)
 
 
-def test_mirrored_and_rotated_monkey(scene):
+@pytest.mark.parametrize("kind", TRANSFORMS)
+def test_mirrored_or_rotated_monkey(scene, kind):
     """Suzanne with scale (-1, 1, 1) had mean AO 0.07 instead of 0.74: inside-out shadows."""
     obj = add_object("monkey", monkey_mesh())
-    check_invariance(obj, obj)
+    check_invariance(obj, obj, TRANSFORMS[kind])
 
 
-def test_mirrored_and_rotated_character(scene):
+@pytest.mark.parametrize("kind", TRANSFORMS)
+def test_mirrored_or_rotated_character(scene, kind):
     """Cesium Man at frame 12, mirrored and rotated through its armature's root."""
     obj, root = import_character("cesium_man.glb")
     scene.frame_set(12)
-    check_invariance(obj, root)
+    check_invariance(obj, root, TRANSFORMS[kind])
 
 
 def test_mirroring_rebuilds_the_solver_once(scene, monkeypatch):
@@ -295,6 +301,35 @@ def test_source_visible_only_through_instances(scene):
     assert mesh_io.RADIANCE in source.data.attributes
     assert "visible only through instances (by 'instancer')" in source.hemishadow.status
     assert any("rock: visible only through instances" in w for w in warnings)
+
+
+def scatter(scene, source):
+    """A grid whose geometry nodes put an instance of `source` on each of its 16 points."""
+    grid = bpy.data.objects.new("scatter", bpy.data.meshes.new("grid"))
+    grid.data.from_pydata([(x, y, 0) for x in range(4) for y in range(4)], [], [])
+    scene.collection.objects.link(grid)
+    tree = bpy.data.node_groups.new("scatter", "GeometryNodeTree")
+    tree.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
+    tree.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    group_in, group_out = tree.nodes.new("NodeGroupInput"), tree.nodes.new("NodeGroupOutput")
+    on_points, info = tree.nodes.new("GeometryNodeInstanceOnPoints"), tree.nodes.new("GeometryNodeObjectInfo")
+    info.inputs["Object"].default_value = source
+    info.inputs["As Instance"].default_value = True
+    tree.links.new(group_in.outputs[0], on_points.inputs["Points"])
+    tree.links.new(info.outputs["Geometry"], on_points.inputs["Instance"])
+    tree.links.new(on_points.outputs["Instances"], group_out.inputs[0])
+    grid.modifiers.new("scatter", "NODES").node_group = tree
+    bpy.context.view_layer.update()
+
+
+def test_hidden_source_of_geometry_nodes_instances(scene):
+    source = add_object("rock", monkey_mesh("rock"))
+    source.hide_set(True)
+    scatter(scene, source)
+    computed, errors, warnings = engine_bridge.compute_now(scene, bpy.context.evaluated_depsgraph_get())
+    assert computed == ["rock"] and not errors
+    assert "visible only through instances (by 'scatter')" in source.hemishadow.status
+    assert any(w.startswith("rock: visible only through instances") for w in warnings)
 
 
 # -- case 9: loose geometry, Phong, stale outputs, errors, objects that are not meshes -------
