@@ -24,8 +24,10 @@ from . import objects as scope
 class _Entry:
     key: tuple
     solver: object
-    fingerprint: int | None = None  # hash of the positions (and view) `transfer` was computed on
-    transfer: np.ndarray | None = None
+    fingerprint: int | None = None  # hash of the positions (and view) in the object's frame, as solved
+    solved: np.ndarray | None = None  # transfer in the object's frame
+    rotation: bytes | None = None  # the frame's rotation `transfer` was turned by
+    transfer: np.ndarray | None = None  # in world space
 
 
 @dataclass
@@ -54,7 +56,7 @@ def _albedo(obj):
     return np.asarray(obj.hemishadow.albedo, np.float32)
 
 
-def _solver_for(obj, vertices, triangles):
+def _solver_for(obj, vertices, triangles, frame_matrix=None):
     import hemishadow
 
     settings = obj.hemishadow
@@ -64,19 +66,23 @@ def _solver_for(obj, vertices, triangles):
     entry = _entries.get(obj.session_uid)
     if entry is None or entry.key != key:
         # Built on the rest pose, not on this frame: results do not depend on where playback started.
-        solver = hemishadow.TransferSolver(mesh_io.read_rest(obj), triangles, bands=settings.band_count,
+        solver = hemishadow.TransferSolver(mesh_io.read_rest(obj, frame_matrix), triangles, bands=settings.band_count,
                                            brdf=settings.brdf.lower(), exponent=settings.exponent if phong else None)
         entry = _entries[obj.session_uid] = _Entry(key, solver)
     return entry
 
 
-def _view_directions(obj, scene, vertices):
-    """Per-vertex unit directions towards the active camera (Phong), or None (diffuse)."""
+def _view_directions(obj, scene, vertices, frame=None):
+    """Per-vertex unit directions towards the active camera (Phong), or None (diffuse);
+    `vertices` in world space, or in the object's frame (a mesh_io.Frame)."""
     if obj.hemishadow.brdf != "PHONG":
         return None
     if scene.camera is None:
         raise mesh_io.SkipObject(f"{obj.name}: the Phong BRDF needs an active camera for the view direction")
-    eye = np.asarray(scene.camera.matrix_world.translation, np.float32)
+    eye = np.asarray(scene.camera.matrix_world.translation, np.float64)
+    if frame is not None and frame.rotation is not None:
+        eye = frame.rotation.T @ (eye - frame.offset)
+    eye = eye.astype(np.float32)
     view = eye - vertices
     view /= np.maximum(np.linalg.norm(view, axis=1, keepdims=True), 1e-12)
     return view
@@ -86,23 +92,41 @@ def compute_object(obj, depsgraph, scene, *, force=False, lighting=None):
     """Transfer, AO and radiance of the object's evaluated mesh, as a Result; None when the
     positions (and view) are those of the last computation and `force` is false.
     Raises mesh_io.SkipObject, or the engine's ValueError / RuntimeError, each message
-    starting with the object's name."""
+    starting with the object's name.
+
+    The engine computes in the object's frame (mesh_io.object_frame): a turned or mirrored
+    object gets exactly the turned or mirrored transfer, and a rigid motion solves nothing."""
     with named_errors(obj):
         t0 = time.perf_counter()
-        vertices, triangles, normals = mesh_io.read_evaluated(obj, depsgraph)
-        view = _view_directions(obj, scene, vertices)
+        vertices, triangles, normals, frame = mesh_io.read_in_frame(obj, depsgraph)
+        view = _view_directions(obj, scene, vertices, frame)
         t1 = time.perf_counter()
-        entry = _solver_for(obj, vertices, triangles)
+        entry = _solver_for(obj, vertices, triangles, frame.matrix)
         fingerprint = hash((vertices.tobytes(), None if view is None else view.tobytes()))
+        rotation = None if frame.rotation is None else frame.rotation.tobytes()
+        solved = entry.solved is not None and entry.fingerprint == fingerprint
         written = mesh_io.RADIANCE in obj.data.attributes  # gone after Clear, or undone
-        if not force and written and entry.transfer is not None and entry.fingerprint == fingerprint:
+        if not force and written and solved and entry.transfer is not None and entry.rotation == rotation:
             return None
-        entry.transfer, entry.fingerprint = None, None  # never keep a stale pair if solve raises
-        transfer = entry.solver.solve(vertices, normals, view)
-        entry.transfer, entry.fingerprint = transfer, fingerprint
-        result = _shade(obj, scene, transfer, lighting)
+        if force or not solved:
+            entry.solved, entry.fingerprint, entry.transfer = None, None, None  # no stale pair if solve raises
+            entry.solved, entry.fingerprint = entry.solver.solve(vertices, normals, view), fingerprint
+        entry.transfer, entry.rotation = to_world_transfer(entry.solved, frame.rotation), rotation
+        result = _shade(obj, scene, entry.transfer, lighting)
         result.io_seconds, result.engine_seconds = t1 - t0, time.perf_counter() - t1
         return result
+
+
+def to_world_transfer(transfer, rotation):
+    """Transfer (V, K) computed in an object frame, turned into world space by the frame's
+    rotation (3, 3) (None: already there). Exact: rotations and mirrors keep each SH band."""
+    import hemishadow
+
+    if rotation is None:
+        return transfer
+    k = transfer.shape[1]
+    turn = hemishadow.rotate_sh(np.eye(k, dtype=np.float32), rotation)  # (K, K): coefficients -> turned
+    return np.ascontiguousarray(transfer @ turn.T, dtype=np.float32)
 
 
 @contextmanager

@@ -18,6 +18,8 @@ ORIGINAL mesh (`obj.data`), so the engine must see one position per original ver
 Welding (seams, triangle soups such as fox.glb) is the engine's job: it welds by position.
 """
 
+from typing import NamedTuple
+
 import bpy
 import numpy as np
 
@@ -112,12 +114,11 @@ def _blocking_modifier(obj, render):
     return None
 
 
-def read_evaluated(obj, depsgraph):
-    """(vertices (V, 3) float32 world space, triangles (M, 3) uint32, None) of an object's
-    evaluated mesh on its original topology (see the module notes). Raises SkipObject."""
+def _evaluated_local(obj, depsgraph):
+    """(positions (V, 3) in the object's local space, world matrix) of the evaluated mesh on
+    its original topology (see the module notes). Raises SkipObject."""
     check_computable(obj)
-    original = obj.data
-    count = len(original.vertices)
+    count = len(obj.data.vertices)
     obj_eval = obj.evaluated_get(depsgraph)
     mesh_eval = obj_eval.data
     if len(mesh_eval.vertices) != count:
@@ -126,17 +127,60 @@ def read_evaluated(obj, depsgraph):
             name = f"modifier '{blocker.name}' ({blocker.type})" if blocker else "a modifier"
             raise TopologyChanged(f"{obj.name}: {name} changes the vertices in a way hemishadow cannot map back "
                                   "to the original mesh; move it below the result or apply it")
-    matrix = obj_eval.matrix_world
-    vertices = to_world(positions_of(mesh_eval, count), matrix)
-    return vertices, oriented(triangles_of(original), matrix), None
+    return positions_of(mesh_eval, count), obj_eval.matrix_world
 
 
-def read_rest(obj):
-    """Positions (V, 3) float32 of the original (undeformed) mesh in world space: the rest pose
-    the solver builds its hierarchy from, the same whichever frame is computed first. Use it
-    with the triangles of `read_evaluated`, which are wound for the object's (mirroring or
-    not) matrix."""
-    return to_world(positions_of(obj.data), obj.matrix_world)
+def read_evaluated(obj, depsgraph):
+    """(vertices (V, 3) float32 world space, triangles (M, 3) uint32, None) of an object's
+    evaluated mesh on its original topology (see the module notes). Raises SkipObject."""
+    local, matrix = _evaluated_local(obj, depsgraph)
+    return to_world(local, matrix), oriented(triangles_of(obj.data), matrix), None
+
+
+class Frame(NamedTuple):
+    """An object's world matrix split as world = rotation @ (matrix @ local) + offset:
+    `rotation` the orthogonal part (a mirror when the object is mirrored), None when there is
+    none (then `matrix` is the world matrix and `offset` zero); `matrix` (4, 4) the scale and
+    shear, symmetric positive (semi)definite, with no translation."""
+
+    rotation: np.ndarray | None
+    matrix: np.ndarray
+    offset: np.ndarray
+
+
+def object_frame(matrix) -> Frame:
+    """The polar decomposition of the world matrix. Positions in the frame (`matrix` applied to
+    local positions) are the same however the object is moved, turned or mirrored, so the
+    engine computes the same transfer for them (and nothing when only that changed), and
+    `rotation` turns it into world space: exactly the turned or mirrored result."""
+    m = np.asarray(matrix, np.float64)
+    u, scales, vt = np.linalg.svd(m[:3, :3])
+    rotation = u @ vt
+    if np.abs(rotation - np.eye(3)).max() < 1e-6:  # not turned: the world matrix as it is
+        return Frame(None, m, np.zeros(3))
+    frame = np.eye(4)
+    if np.ptp(scales) <= 1e-6 * scales.max():  # a uniform scale: exactly, as turning must not move vertices
+        frame[:3, :3] *= np.float32(scales.mean())
+    else:
+        frame[:3, :3] = rotation.T @ m[:3, :3]
+    return Frame(rotation, frame, m[:3, 3].copy())
+
+
+def read_in_frame(obj, depsgraph):
+    """(vertices (V, 3) float32 in the object's frame (see `object_frame`), triangles (M, 3)
+    uint32, None, Frame): what the live path computes on. The frame never mirrors, so the
+    triangles keep their winding."""
+    local, matrix = _evaluated_local(obj, depsgraph)
+    frame = object_frame(matrix)
+    return to_world(local, frame.matrix), triangles_of(obj.data), None, frame
+
+
+def read_rest(obj, matrix=None):
+    """Positions (V, 3) float32 of the original (undeformed) mesh, by default in world space:
+    the rest pose the solver builds its hierarchy from, the same whichever frame is computed
+    first. Use it with the triangles of `read_evaluated`, which are wound for the object's
+    (mirroring or not) matrix, or with `matrix` = the `Frame.matrix` of `read_in_frame`."""
+    return to_world(positions_of(obj.data), obj.matrix_world if matrix is None else matrix)
 
 
 def _attribute(mesh, name, data_type):

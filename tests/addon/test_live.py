@@ -57,20 +57,32 @@ def sh_layers(obj):
 
 def expected_transfer(obj, count=None):
     """The engine's transfer on the evaluated mesh, read here independently of the add-on:
-    a fresh solver built on the rest pose (the original mesh in world space)."""
+    a fresh solver built on the rest pose, both in the object's frame (its world matrix
+    without the rotation: the polar decomposition), the result turned by that rotation."""
     depsgraph = bpy.context.evaluated_depsgraph_get()
     evaluated = obj.evaluated_get(depsgraph)
     count = count or len(obj.data.vertices)
+    matrix = np.array(evaluated.matrix_world, np.float64)
+    u, scales, vt = np.linalg.svd(matrix[:3, :3])
+    rotation = u @ vt
+    turned = np.abs(rotation - np.eye(3)).max() >= 1e-6
+    if not turned:
+        shape, offset = matrix[:3, :3], matrix[:3, 3]
+    elif np.ptp(scales) <= 1e-6 * scales.max():
+        shape, offset = np.float32(scales.mean()) * np.eye(3), np.zeros(3)
+    else:
+        shape, offset = rotation.T @ matrix[:3, :3], np.zeros(3)
+    shape, offset = shape.astype(np.float32), offset.astype(np.float32)
     co = np.empty(len(evaluated.data.vertices) * 3, np.float32)
     evaluated.data.vertices.foreach_get("co", co)
-    matrix = np.array(evaluated.matrix_world, np.float32)
-    world = co.reshape(-1, 3)[:count] @ matrix[:3, :3].T + matrix[:3, 3]
+    frame = co.reshape(-1, 3)[:count] @ shape.T + offset
     tris = np.empty(len(obj.data.loop_triangles) * 3, np.int64)
     obj.data.loop_triangles.foreach_get("vertices", tris)
     rest = np.empty(count * 3, np.float32)
     obj.data.vertices.foreach_get("co", rest)
-    rest = rest.reshape(-1, 3) @ np.array(obj.matrix_world, np.float32)[:3, :3].T + np.array(obj.matrix_world)[:3, 3]
-    return hemishadow.TransferSolver(rest, tris.reshape(-1, 3), bands=5).solve(world)
+    rest = rest.reshape(-1, 3) @ shape.T + offset
+    transfer = hemishadow.TransferSolver(rest, tris.reshape(-1, 3), bands=5).solve(frame)
+    return hemishadow.rotate_sh(transfer.T, rotation).T if turned else transfer
 
 
 def expected_radiance(obj, scene, transfer):

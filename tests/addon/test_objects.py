@@ -166,18 +166,42 @@ def test_mirrored_or_rotated_character(scene, kind):
     check_invariance(obj, root, TRANSFORMS[kind])
 
 
-def test_mirroring_rebuilds_the_solver_once(scene, monkeypatch):
-    """Flipping the sign of a scale changes the winding: the live path must notice it
-    (a new solver), and recompute once per change only."""
+def test_turning_or_mirroring_solves_nothing(scene, monkeypatch):
+    """The engine computes in the object's frame: turning or mirroring the object only turns
+    the transfer it already has."""
     obj = add_object("monkey", monkey_mesh())
     scene.hemishadow.live = True
     ao = attribute(obj, mesh_io.AO)
     solves = count_solves(monkeypatch)
     obj.scale = (-1, 1, 1)
     scene.frame_set(2)
+    obj.rotation_euler = (0.3, 0.2, 1.0)
     scene.frame_set(3)
-    assert len(solves) == 1
-    assert np.abs(attribute(obj, mesh_io.AO) - ao).max() < 0.02
+    assert solves == []
+    np.testing.assert_allclose(attribute(obj, mesh_io.AO), ao, atol=1e-5)
+
+
+def test_turned_phong_object_sees_the_camera_from_its_frame(scene):
+    """Turning a Phong object and its camera together turns its transfer (the view direction
+    goes into the object's frame as well)."""
+    obj = add_object("monkey", monkey_mesh())
+    obj.hemishadow.brdf = "PHONG"
+    camera = bpy.data.objects.new("camera", bpy.data.cameras.new("camera"))
+    scene.collection.objects.link(camera)
+    scene.camera = camera
+    eye = np.array((0.5, -4.0, 1.0))
+    camera.location = eye
+    bpy.context.view_layer.update()
+    bpy.ops.hemishadow.compute()
+    transfer0 = sh_layers(obj)
+    turn = np.array(ROTATION @ Matrix.Diagonal((1, -1, 1)))
+    obj.matrix_world = Matrix(turn).to_4x4()
+    camera.location = turn @ eye
+    bpy.context.view_layer.update()
+    bpy.ops.hemishadow.compute()
+    back = hemishadow.rotate_sh(sh_layers(obj).T, turn.T).T
+    relative = np.linalg.norm(back - transfer0, axis=1) / np.maximum(np.linalg.norm(transfer0, axis=1), 0.05)
+    assert relative.max() < 0.02, relative.max()
 
 
 # -- case 8: linked duplicates and instances -------------------------------------------------
