@@ -6,6 +6,9 @@ of them changes. The last transfer vectors of every object are kept, so a change
 or albedo only re-shades (a matrix product), and a depsgraph update that did not move any
 vertex (for instance the one our own attribute writes cause) computes nothing.
 
+Which objects are computed (one per shared mesh; not curves or text; instances) is decided
+in objects.py; every error message starts with the object's name (`named_errors`).
+
 Time is split into Blender I/O (reading the evaluated mesh, writing attributes) and engine
 time (transfer, shading), per object, in `last_timings`.
 """
