@@ -14,9 +14,11 @@ console.
 import bpy
 from bpy.app.handlers import persistent
 
-from . import engine_bridge
+from . import engine_bridge, lighting, world_render
 
 _busy = False
+#: scene name -> lighting.fingerprint the objects were last shaded with.
+_lighting_seen: dict[str, str] = {}
 
 
 def _cache_handled(obj, scene):
@@ -45,11 +47,12 @@ def _live_and_idle(handler):
 
     def guarded(scene, depsgraph):
         global _busy
-        if _busy or not scene.hemishadow.live:
+        if _busy or not scene.hemishadow.live or world_render.probing():
             return
         _busy = True
         try:
-            handler(scene, depsgraph)
+            with world_render.no_render():  # Blender cannot start a render from a handler
+                handler(scene, depsgraph)
         finally:
             _busy = False
 
@@ -57,10 +60,27 @@ def _live_and_idle(handler):
     return guarded
 
 
+def _lighting_changed(scene):
+    """True (once) when any lighting input differs from the last time: keyframed or driven
+    World inputs, moved, hidden or edited lamps, the scene's lighting settings."""
+    now = lighting.fingerprint(scene)
+    if _lighting_seen.get(scene.name) == now:
+        return False
+    _lighting_seen[scene.name] = now
+    return True
+
+
+def _reshade_if_lighting_changed(scene, named=False):
+    if _lighting_changed(scene) or named:
+        engine_bridge.reshade_scene(scene)
+        lighting.report(scene)
+
+
 @persistent
 @_live_and_idle
 def on_frame_change(scene, depsgraph):
     _report(engine_bridge.update_scene(scene, depsgraph, _live_objects(scene)))
+    _reshade_if_lighting_changed(scene)
 
 
 def _deformed_objects(scene, depsgraph):
@@ -80,13 +100,21 @@ def on_depsgraph_update(scene, depsgraph):
     objects = [o for o in _deformed_objects(scene, depsgraph) if not _cache_handled(o, scene)]
     if objects:
         _report(engine_bridge.update_scene(scene, depsgraph, objects))
-    if _lighting_updated(depsgraph):
-        engine_bridge.reshade_scene(scene)
+    _reshade_if_lighting_changed(scene, _lighting_updated(depsgraph))
 
 
 @persistent
 def on_load(_):
     engine_bridge.forget()
+    _lighting_seen.clear()
+
+
+@persistent
+def on_render_init(scene, *_):
+    """Renders cannot render the World themselves: say which frames have no projection."""
+    if world_render.probing() or not scene.hemishadow.live:
+        return
+    lighting.check_before_render(scene)
 
 
 @persistent
@@ -98,6 +126,7 @@ _HANDLERS = (
     (bpy.app.handlers.frame_change_post, on_frame_change),
     (bpy.app.handlers.depsgraph_update_post, on_depsgraph_update),
     (bpy.app.handlers.load_post, on_load),
+    (bpy.app.handlers.render_init, on_render_init),
     (bpy.app.handlers.undo_post, on_undo_redo),
     (bpy.app.handlers.redo_post, on_undo_redo),
 )
