@@ -5,7 +5,7 @@ Background colour exactly; every other node setup (Sky Texture, gradients, mixes
 ...) is rendered here: a temporary scene holding only a panoramic equirectangular camera, a
 temporary copy of the World (so the user's World is never touched; in the copy, Light Path
 outputs are replaced by the values a diffuse ray sees, since diffuse rays are what light the
-object), 128 x 64 pixels, a few samples. The image is projected with
+object), 256 x 128 pixels, 16 samples (about a second). The image is projected with
 `hemishadow.project_environment`; everything temporary is removed.
 
 Blender cannot start a render inside a frame handler or while rendering, so nothing here
@@ -34,7 +34,7 @@ import numpy as np
 __all__ = ["fingerprint", "is_animated", "cached", "nearest", "render_projection", "precompute", "missing_frames",
            "schedule", "no_render", "can_render", "clear"]
 
-WIDTH, HEIGHT, SAMPLES, BANDS = 128, 64, 16, 5
+WIDTH, HEIGHT, SAMPLES, BANDS = 256, 128, 16, 5  # 128 x 64 leaves 3 % noise on the forest HDRI
 _CACHE_SIZE = 1024
 _projections: collections.OrderedDict = collections.OrderedDict()
 _no_render = 0
@@ -237,6 +237,28 @@ def _as_diffuse_rays(tree):
                 tree.links.new(value.outputs[0], target)
 
 
+def _freeze_animation(copy, frame):
+    """In the (temporary) copy: every F-curve's value at `frame` written in, the animation
+    removed. A still render does not evaluate the copy's animation at the probe's frame."""
+    for owner in (copy, copy.node_tree):
+        anim = owner.animation_data if owner is not None else None
+        if anim is None:
+            continue
+        for curve in _fcurves(anim):
+            base, _, name = curve.data_path.rpartition(".")
+            try:
+                target = owner.path_resolve(base) if base else owner
+                value = curve.evaluate(frame)
+                current = getattr(target, name)
+                if hasattr(current, "__len__") and not isinstance(current, str):
+                    current[curve.array_index] = value
+                else:
+                    setattr(target, name, type(current)(value) if isinstance(current, (bool, int)) else value)
+            except (ValueError, AttributeError, TypeError):
+                continue
+        owner.animation_data_clear()
+
+
 def _probe_scene(world_copy, frame):
     scene = bpy.data.scenes.new("hemishadow_world_probe")
     scene.world = world_copy
@@ -299,6 +321,7 @@ def render_image(world, frame) -> np.ndarray:
     copy = world.copy()
     scene = camera = camera_data = None
     try:
+        _freeze_animation(copy, frame)
         if copy.node_tree is not None:
             _as_diffuse_rays(copy.node_tree)
         if hasattr(copy, "visibility"):
