@@ -14,7 +14,7 @@ console.
 import bpy
 from bpy.app.handlers import persistent
 
-from . import engine_bridge, lighting, world_render
+from . import engine_bridge, evaluated, lighting, world_render
 
 _busy = False
 #: scene name -> lighting.fingerprint the objects were last shaded with.
@@ -51,7 +51,9 @@ def _live_and_idle(handler):
             return
         _busy = True
         try:
-            with world_render.no_render():  # Blender cannot start a render from a handler
+            # Blender cannot start a render from a handler; in animation renders only the
+            # render's depsgraph holds this frame's lighting.
+            with world_render.no_render(), evaluated.using(depsgraph):
                 handler(scene, depsgraph)
         finally:
             _busy = False

@@ -26,6 +26,8 @@ import math
 
 import numpy as np
 
+from . import evaluated
+
 __all__ = ["Lamp", "scene_lamps", "lamp_irradiance", "unsupported", "lamp_power_color", "visible_lamps"]
 
 _KINDS = ("POINT", "SPOT", "AREA")
@@ -56,7 +58,8 @@ def lamp_power_color(light) -> np.ndarray:
 
 
 def visible_lamps(scene, kinds):
-    """Lamp objects of the given types that render and are visible, with some power."""
+    """Evaluated lamp objects (see evaluated.py) of the given types that render and are
+    visible, with some power."""
     for obj in scene.objects:
         if obj.type != "LIGHT" or obj.data.type not in kinds or obj.hide_render:
             continue
@@ -64,6 +67,7 @@ def visible_lamps(scene, kinds):
             visible = obj.visible_get()
         except (RuntimeError, TypeError):
             visible = not obj.hide_viewport
+        obj = evaluated.of(obj)
         if visible and obj.data.energy > 0:
             yield obj
 

@@ -19,7 +19,7 @@ import hashlib
 import bpy
 import numpy as np
 
-from . import lamps, world, world_render
+from . import evaluated, lamps, world, world_render
 
 __all__ = ["shade", "fingerprint", "report", "messages", "check_before_render"]
 
@@ -53,7 +53,7 @@ def fingerprint(scene) -> str:
     settings = getattr(scene, "hemishadow", None)
     parts = [tuple(getattr(settings, n, None) if not hasattr(getattr(settings, n, None), "__len__")
                    else tuple(getattr(settings, n)) for n in world.DEFAULTS) if settings else None]
-    w = scene.world
+    w = evaluated.of(scene.world)
     if w is not None:
         parts.append(world_render.fingerprint(w))
         # Animated values themselves (the digest above leaves them out): what this frame shows.

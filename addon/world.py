@@ -34,7 +34,7 @@ import os
 import bpy
 import numpy as np
 
-from . import lamps, world_render
+from . import evaluated, lamps, world_render
 
 __all__ = ["LightingSource", "lighting_source", "scene_lighting", "sun_lobe", "clear_cache", "notes"]
 
@@ -146,6 +146,7 @@ def _rendered(scene, world, bands):
     """(the World's rendered projection at this frame, note): rendered now when allowed, else
     scheduled for a timer with the nearest projection (or darkness) meanwhile."""
     frame = scene.frame_current
+    world = world.original
     found = world_render.cached(world, frame)
     if found is None and world_render.can_render():
         found = world_render.render_projection(world, frame)
@@ -179,7 +180,7 @@ def lighting_source(scene, settings=None) -> LightingSource:
     fallback_note = ""
     if kind == "WORLD":
         if scene.world is not None:
-            return _world_source(scene.world)
+            return _world_source(evaluated.of(scene.world))
         fallback_note = " (no World)"
     if kind in ("WORLD", "BUILTIN"):
         builtin = _builtin_source(_settings_value(settings, "hdri"))

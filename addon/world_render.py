@@ -184,6 +184,7 @@ def fingerprint(world) -> str:
 
 
 def _key(world, frame):
+    world = world.original
     return (world.session_uid, fingerprint(world), int(frame) if is_animated(world) else None)
 
 
@@ -199,7 +200,7 @@ def cached(world, frame) -> np.ndarray | None:
 
 def nearest(world, frame) -> np.ndarray | None:
     """The closest projection of this World there is (another frame, or before the last edit), or None."""
-    uid, best, best_distance = world.session_uid, None, None
+    uid, best, best_distance = world.original.session_uid, None, None
     for (w, _fp, f), value in reversed(_projections.items()):
         if w != uid:
             continue
@@ -318,7 +319,7 @@ def render_image(world, frame) -> np.ndarray:
     if not can_render():
         raise RuntimeError("the World cannot be rendered now (inside a handler or during a render)")
     _probing = True
-    copy = world.copy()
+    copy = world.original.copy()
     scene = camera = camera_data = None
     try:
         _freeze_animation(copy, frame)
