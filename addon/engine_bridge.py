@@ -185,10 +185,11 @@ def reshade_object(obj, scene, lighting=None):
     return True
 
 
-def reshade_scene(scene):
-    """Re-shade every object of the scene that has transfer vectors; errors go to the status."""
+def reshade_scene(scene, objects=None):
+    """Re-shade every object of the scene (or of `objects`) that has transfer vectors; errors
+    go to the status."""
     lighting = {}
-    for obj in scene.objects:
+    for obj in scene.objects if objects is None else objects:
         if obj.session_uid in _entries:
             try:
                 bands = obj.hemishadow.band_count

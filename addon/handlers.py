@@ -72,17 +72,19 @@ def _lighting_changed(scene):
     return True
 
 
-def _reshade_if_lighting_changed(scene, named=False):
+def _reshade_if_lighting_changed(scene, live=None, named=False):
+    """Re-shade the live objects (a valid bake cache re-shades its own) when the lighting changed."""
     if _lighting_changed(scene) or named:
-        engine_bridge.reshade_scene(scene)
+        engine_bridge.reshade_scene(scene, _live_objects(scene) if live is None else live)
         lighting.report(scene)
 
 
 @persistent
 @_live_and_idle
 def on_frame_change(scene, depsgraph):
-    _report(engine_bridge.update_scene(scene, depsgraph, _live_objects(scene)))
-    _reshade_if_lighting_changed(scene)
+    live = _live_objects(scene)
+    _report(engine_bridge.update_scene(scene, depsgraph, live))
+    _reshade_if_lighting_changed(scene, live)
 
 
 def _deformed_objects(scene, depsgraph):
@@ -102,7 +104,7 @@ def on_depsgraph_update(scene, depsgraph):
     objects = [o for o in _deformed_objects(scene, depsgraph) if not _cache_handled(o, scene)]
     if objects:
         _report(engine_bridge.update_scene(scene, depsgraph, objects))
-    _reshade_if_lighting_changed(scene, _lighting_updated(depsgraph))
+    _reshade_if_lighting_changed(scene, named=_lighting_updated(depsgraph))
 
 
 @persistent
