@@ -22,6 +22,15 @@ def using(depsgraph):
         _depsgraph = previous
 
 
+def depsgraph():
+    """The handler's depsgraph, or the context's evaluated one outside handlers."""
+    if _depsgraph is not None:
+        return _depsgraph
+    import bpy
+
+    return bpy.context.evaluated_depsgraph_get()
+
+
 def of(data):
     """The evaluated copy of an ID in the current depsgraph, or the ID itself outside handlers."""
     if _depsgraph is None or data is None:

@@ -28,7 +28,7 @@ import numpy as np
 
 from . import evaluated
 
-__all__ = ["Lamp", "scene_lamps", "lamp_irradiance", "unsupported", "lamp_power_color", "visible_lamps"]
+__all__ = ["Lamp", "scene_lamps", "lamp_irradiance", "unsupported", "lamp_power_color", "visible_lamps", "lamps_key"]
 
 _KINDS = ("POINT", "SPOT", "AREA")
 
@@ -119,6 +119,12 @@ def scene_lamps(scene) -> list[Lamp]:
         else:
             lamps.append(Lamp(obj.name, "POINT", position, axis, power, radius))
     return lamps
+
+
+def lamps_key(scene) -> str:
+    """A string that changes when any point, spot or area lamp does ("" when there are none)."""
+    found = scene_lamps(scene)
+    return repr(tuple(lamp.key for lamp in found)) if found else ""
 
 
 def unsupported(scene) -> list[str]:

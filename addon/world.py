@@ -320,6 +320,11 @@ def _world_source(world):
     return LightingSource("WORLD_RENDER", f"World: {world.name}, rendered by Cycles ({why})", world=world)
 
 
+def needs_render(world) -> bool:
+    """True when the World takes no fast path: its lighting comes from a Cycles render."""
+    return _world_environment(world)[0] is None
+
+
 def _plain_background(world):
     """(the Background feeding the World Output directly, or None, why not)."""
     tree = world.node_tree

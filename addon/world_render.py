@@ -212,8 +212,10 @@ def nearest(world, frame) -> np.ndarray | None:
 
 def missing_frames(scene, frames=None) -> list[int]:
     """Frames (default: the current one, or the whole range for an animated World) not projected yet."""
+    from .world import needs_render
+
     world = scene.world
-    if world is None:
+    if world is None or not needs_render(world):
         return []
     if frames is None:
         frames = range(scene.frame_start, scene.frame_end + 1) if is_animated(world) else [scene.frame_current]

@@ -189,3 +189,24 @@ def test_live_path_shades_with_point_lamps(live_scene):
     bpy.context.view_layer.update()
     engine_bridge.reshade_scene(live_scene)
     assert radiance_of(plane)[:, 0].max() < 0.3 * shown.max()
+
+
+def test_bake_includes_lamps_and_playback_follows_a_moved_lamp(live_scene, tmp_path):
+    plane = grid()
+    point = lamp(live_scene, "POINT", (0.2, 0.1, 1.5), energy=50.0)
+    bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "lamp.blend"))
+    addon.operators.bake.bake_range(live_scene, [plane], 1, 2)
+    cached = addon.cache.load(plane).radiance[0]
+    engine_bridge.update_scene(live_scene, bpy.context.evaluated_depsgraph_get(), [plane], force=True)
+    np.testing.assert_allclose(cached, radiance_of(plane), rtol=1e-4, atol=1e-4 * cached.max())
+    assert cached.max() > 0.1
+    # the lamp moves after the bake: playback re-shades the stored transfer, it does not copy
+    point.location = (-0.5, 0.0, 1.0)
+    bpy.context.view_layer.update()
+    live_scene.hemishadow.live = True
+    live_scene.frame_set(1)
+    engine_bridge.update_scene(live_scene, bpy.context.evaluated_depsgraph_get(), [plane], force=True)
+    live = radiance_of(plane).copy()
+    addon.cache.apply_cached(plane, 1, live_scene)
+    np.testing.assert_allclose(radiance_of(plane), live, rtol=2e-3, atol=2e-3 * live.max())  # float16 transfer
+    assert np.abs(live - cached).max() > 0.2 * cached.max()
