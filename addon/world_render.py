@@ -219,9 +219,11 @@ def missing_frames(scene, frames=None) -> list[int]:
         return []
     if frames is None:
         frames = range(scene.frame_start, scene.frame_end + 1) if is_animated(world) else [scene.frame_current]
-    if not is_animated(world):
+    animated = is_animated(world)
+    if not animated:
         frames = list(frames)[:1]
-    return [f for f in frames if _key(world, f) not in _projections]
+    uid, digest = world.original.session_uid, fingerprint(world.original)
+    return [f for f in frames if (uid, digest, int(f) if animated else None) not in _projections]
 
 
 # ----------------------------------------------------------------------------------------
@@ -398,6 +400,6 @@ def _tick():
             _scheduled.pop(name)
             continue
         if on_ready is not None:
-            on_ready(scene, len(todo) - 1)
+            on_ready(scene, len(missing_frames(scene)))
         return 0.01
     return None

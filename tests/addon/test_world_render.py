@@ -178,24 +178,73 @@ def test_in_a_handler_nothing_renders_it_is_scheduled_and_said(scene, monkeypatc
 
 
 def test_animated_world_is_precomputed_per_frame(scene):
-    w, nodes, _ = new_world(scene)
-    strength = nodes["Background"].inputs["Strength"]
-    color = nodes["Background"].inputs["Color"]
-    color.default_value = (1, 1, 1, 1)
-    color.keyframe_insert("default_value", frame=1)  # animated but constant: must still key by frame
-    strength.default_value = 1.0
-    strength.keyframe_insert("default_value", frame=1)
-    strength.default_value = 3.0
-    strength.keyframe_insert("default_value", frame=3)
+    w = gradient_world(scene, 1.0, (0, 0, 0))  # radiance = the Math node's value, rendered
+    value = w.node_tree.nodes["Math"].inputs[1]
+    value.default_value = 1.0
+    value.keyframe_insert("default_value", frame=1)
+    value.default_value = 3.0
+    value.keyframe_insert("default_value", frame=3)
     scene.frame_start, scene.frame_end = 1, 3
     assert world_render.is_animated(w)
     assert world_render.missing_frames(scene) == [1, 2, 3]
     assert world_render.precompute(scene) == 3
     assert world_render.missing_frames(scene) == []
-    for frame, value in [(1, 1.0), (2, 2.0), (3, 3.0)]:
+    for frame, radiance in [(1, 1.0), (2, 2.0), (3, 3.0)]:
         scene.frame_set(frame)
         with world_render.no_render():  # as in the frame handler: cached, nothing rendered
             lighting = world.scene_lighting(scene, 3, settings())
-        assert world.lighting_source(scene, settings()).kind == "WORLD_COLOR"  # exact anyway
-        assert world_render.cached(w, frame)[0, 0] == pytest.approx(value * math.sqrt(4 * math.pi), rel=0.01)
-        assert lighting[0, 0] == pytest.approx(value * math.sqrt(4 * math.pi), rel=1e-5)
+        assert lighting[0, 0] == pytest.approx(radiance * math.sqrt(4 * math.pi), rel=0.01)
+        assert not world.notes(scene)
+
+
+def test_timer_renders_the_current_frame_first_then_the_range(scene, monkeypatch):
+    """Timers do not run in background mode: drive the callback by hand."""
+    w, nodes, _ = new_world(scene)
+    sky = nodes.new("ShaderNodeTexSky")
+    w.node_tree.links.new(sky.outputs[0], nodes["Background"].inputs["Color"])
+    strength = nodes["Background"].inputs["Strength"]
+    strength.keyframe_insert("default_value", frame=1)
+    scene.frame_start, scene.frame_end = 1, 3
+    scene.frame_set(2)
+    ready = []
+    world_render.schedule(scene, lambda s, remaining: ready.append((s.frame_current, remaining)))
+    rendered = []
+    original = world_render.render_projection
+    monkeypatch.setattr(world_render, "render_projection", lambda w, f: rendered.append(f) or original(w, f))
+    while world_render._tick() is not None:
+        pass
+    assert rendered == [2, 1, 3] and [r for _, r in ready] == [2, 1, 0]
+    assert world_render.missing_frames(scene) == []
+    if bpy.app.timers.is_registered(world_render._tick):
+        bpy.app.timers.unregister(world_render._tick)
+
+
+def test_missing_frames_are_reported_before_a_render(addon, scene, capfd):
+    from addon import lighting
+
+    w = gradient_world(scene, 1.0, (0, 0, 0.5))
+    w.node_tree.nodes["Math"].inputs[1].keyframe_insert("default_value", frame=1)
+    scene.frame_start, scene.frame_end = 1, 4
+    assert lighting.check_before_render(scene) == [1, 2, 3, 4]
+    assert "no lighting projection for 4 frames (1..4)" in capfd.readouterr().out
+    world_render.precompute(scene, [1, 2])
+    assert lighting.check_before_render(scene) == [3, 4]
+    bpy.ops.hemishadow.precompute_world()
+    assert lighting.check_before_render(scene) == []
+
+
+def test_no_world_is_reported_by_the_compute_operator(addon, scene, capfd):
+    import bmesh
+
+    scene.world = None
+    bm = bmesh.new()
+    bmesh.ops.create_cube(bm, size=1.0)
+    mesh = bpy.data.meshes.new("cube")
+    bm.to_mesh(mesh)
+    bm.free()
+    cube = bpy.data.objects.new("cube", mesh)
+    scene.collection.objects.link(cube)
+    cube.hemishadow.enabled = True
+    assert bpy.ops.hemishadow.compute(target="ENABLED") == {"FINISHED"}
+    out = capfd.readouterr().out
+    assert "the scene has no World: lit by the built-in HDRI" in out
