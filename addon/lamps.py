@@ -36,16 +36,22 @@ _KINDS = ("POINT", "SPOT", "AREA")
 class Lamp:
     """A lamp's parameters in world space, read once from Blender (numpy only afterwards)."""
 
-    __slots__ = ("name", "kind", "position", "axis", "power", "radius", "cos_half", "blend", "area", "key")
+    __slots__ = ("name", "kind", "position", "axis", "power", "radius", "cos_half", "blend", "area", "edges",
+                 "round", "key")
 
-    def __init__(self, name, kind, position, axis, power, radius=0.0, cos_half=-1.0, blend=0.0, area=0.0):
+    def __init__(self, name, kind, position, axis, power, radius=0.0, cos_half=-1.0, blend=0.0, area=0.0,
+                 edges=None, round_shape=False):
         self.name, self.kind = name, kind
         self.position = np.asarray(position, np.float64)
         self.axis = np.asarray(axis, np.float64)  # the direction it shines along (its -Z)
         self.power = np.asarray(power, np.float64)  # RGB watts, colour and exposure applied
         self.radius, self.cos_half, self.blend, self.area = float(radius), float(cos_half), float(blend), float(area)
+        # Area lamps: the world-space vectors along its two sides (full lengths); disk or ellipse.
+        self.edges = None if edges is None else np.asarray(edges, np.float64)
+        self.round = bool(round_shape)
         self.key = (name, kind, tuple(np.round(self.position, 7)), tuple(np.round(self.axis, 7)),
-                    tuple(np.round(self.power, 7)), self.radius, self.cos_half, self.blend, self.area)
+                    tuple(np.round(self.power, 7)), self.radius, self.cos_half, self.blend, self.area,
+                    None if edges is None else tuple(np.round(self.edges, 7).ravel()), self.round)
 
 
 def lamp_power_color(light) -> np.ndarray:
@@ -72,29 +78,44 @@ def visible_lamps(scene, kinds):
             yield obj
 
 
-#: An area lamp is split into up to PATCHES x PATCHES patches, each its own lobe: one lobe
-#: aimed at the centre misplaces the light of a lamp that is large seen from the vertex.
+#: An area lamp seen from a vertex at distance d under more than about d/4 is split into up
+#: to PATCHES x PATCHES patches, each its own lobe: one lobe aimed at the centre misplaces the
+#: light of a lamp that looks large from the vertex.
 PATCHES = 4
 
 
-def _area_patches(obj, axis, power):
-    """Lamps for the patches of an area lamp (object scale included), each of radiance P / (pi A)."""
+def _area_lamp(obj, position, axis, power):
+    """The area lamp as a Lamp (object scale included), radiance P / (pi A); None when flat."""
     light, matrix = obj.data, obj.matrix_world
     w = light.size
     h = light.size if light.shape in ("SQUARE", "DISK") else light.size_y
     round_shape = light.shape in ("DISK", "ELLIPSE")
-    u = (np.arange(PATCHES) + 0.5) / PATCHES - 0.5  # patch centres in units of the size
-    gu, gv = np.meshgrid(u, u, indexing="ij")
-    keep = (gu**2 + gv**2 <= 0.25) if round_shape else np.ones_like(gu, bool)
-    corners = np.array(matrix, np.float64)
-    local = np.stack([gu[keep] * w, gv[keep] * h, np.zeros(keep.sum()), np.ones(keep.sum())], axis=1)
-    centres = local @ corners.T
-    scale = matrix.to_scale()
-    area = w * abs(scale[0]) * h * abs(scale[1]) * (math.pi / 4 if round_shape else 1.0)
+    rotation_scale = np.array(matrix.to_3x3(), np.float64)
+    edges = np.stack([rotation_scale[:, 0] * w, rotation_scale[:, 1] * h])
+    area = np.linalg.norm(edges[0]) * np.linalg.norm(edges[1]) * (math.pi / 4 if round_shape else 1.0)
     if not area > 0:
-        return []
+        return None
+    return Lamp(obj.name, "AREA", position, axis, power, area=area, edges=edges, round_shape=round_shape)
+
+
+def _patches(lamp, vertices):
+    """The area lamp itself, or its patches when some vertex is close for its size (equal areas;
+    a disk's through the concentric map of the square onto the disk)."""
+    if lamp.edges is None:
+        return [lamp]
+    size = max(np.linalg.norm(lamp.edges[0]), np.linalg.norm(lamp.edges[1]))
+    nearest = np.sqrt(np.min(np.einsum("ij,ij->i", vertices - lamp.position, vertices - lamp.position)))
+    n = int(min(PATCHES, math.ceil(4 * size / max(nearest, 1e-12))))
+    if n <= 1:
+        return [lamp]
+    u = (np.arange(n) + 0.5) / n - 0.5
+    gu, gv = (g.ravel() for g in np.meshgrid(u, u, indexing="ij"))
+    if lamp.round:
+        gu, gv = _concentric(2 * gu, 2 * gv)
+        gu, gv = gu / 2, gv / 2
+    centres = lamp.position + gu[:, None] * lamp.edges[0] + gv[:, None] * lamp.edges[1]
     share = 1.0 / len(centres)
-    return [Lamp(obj.name, "AREA", c[:3], axis, power * share, area=area * share) for c in centres]
+    return [Lamp(lamp.name, "AREA", c, lamp.axis, lamp.power * share, area=lamp.area * share) for c in centres]
 
 
 def scene_lamps(scene) -> list[Lamp]:
@@ -110,7 +131,9 @@ def scene_lamps(scene) -> list[Lamp]:
         axis /= norm
         power = lamp_power_color(light)
         if light.type == "AREA":
-            lamps.extend(_area_patches(obj, axis, power))
+            area = _area_lamp(obj, position, axis, power)
+            if area is not None:
+                lamps.append(area)
             continue
         radius = float(light.shadow_soft_size)
         if light.type == "SPOT":
@@ -169,6 +192,16 @@ def _smoothstep(x):
     return x * x * (3 - 2 * x)
 
 
+def _concentric(a, b):
+    """Shirley and Chiu's equal-area map of the square [-1, 1]^2 onto the unit disk."""
+    wide = np.abs(a) > np.abs(b)
+    r = np.where(wide, a, b)
+    safe_a = np.where(a == 0, 1.0, a)
+    safe_b = np.where(b == 0, 1.0, b)
+    phi = np.where(wide, math.pi / 4 * b / safe_a, math.pi / 2 - math.pi / 4 * a / safe_b)
+    return r * np.cos(phi), r * np.sin(phi)
+
+
 def _lobe_inputs(lamp, vertices):
     """(direction towards the lamp (V, 3), facing irradiance per watt (V,), cos of the cap half-angle (V,))."""
     offset = lamp.position[None, :] - vertices
@@ -200,18 +233,23 @@ def lamp_irradiance(transfer, vertices, lamps) -> np.ndarray:
     T_v . L_lamp,v, vectorised over vertices (transfer (V, K), vertices (V, 3) world space)."""
     import hemishadow
 
-    transfer = np.asarray(transfer, np.float64)
+    transfer = np.asarray(transfer, np.float32)
     vertices = np.asarray(vertices, np.float64)
     count, k = transfer.shape
     bands = int(round(math.sqrt(k)))
     band_of = np.repeat(np.arange(bands), 2 * np.arange(bands) + 1)
     out = np.zeros((count, 3), np.float64)
-    for lamp in lamps:
+    if count == 0:
+        return out.astype(np.float32)
+    pieces = [p for lamp in lamps for p in (_patches(lamp, vertices) if lamp.kind == "AREA" else [lamp])]
+    for lamp in pieces:
         s, per_watt, cos_h = _lobe_inputs(lamp, vertices)
         lit = per_watt > 0
-        if not lit.any():
+        if lit.all():
+            lit = slice(None)  # no copies for the usual case
+        elif not lit.any():
             continue
-        basis = hemishadow.sh_basis(s[lit].astype(np.float32), bands).astype(np.float64)
+        basis = hemishadow.sh_basis(s[lit].astype(np.float32), bands)
         lobe = _cap_bands(cos_h[lit], bands)[:, band_of] * basis
         scalar = np.einsum("vk,vk->v", transfer[lit], lobe) * per_watt[lit]
         out[lit] += scalar[:, None] * lamp.power[None, :]
