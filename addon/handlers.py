@@ -7,6 +7,13 @@ Loops are impossible by construction, on two levels:
   depsgraph_update_post with that object; engine_bridge then sees the same positions as
   last time and computes and writes nothing.
 
+Lighting that changes without a depsgraph update naming it (keyframed or driven lamps and
+World inputs, in playback and in animation renders) is caught by comparing a cheap
+fingerprint of every lighting input (lighting.py) after each frame change and update; a
+change re-shades from the stored transfer. Handlers never render: a World that needs a
+Cycles render is rendered from a timer (world_render.py), and `render_init` reports frames
+of an animated World that were not precomputed.
+
 No error leaves a handler: engine and input errors go to the object's status line and the
 console.
 """
@@ -72,11 +79,16 @@ def _lighting_changed(scene):
     return True
 
 
+def reshade_live(scene, live=None):
+    """Re-shade the live objects with the lighting as it is now (a valid bake cache re-shades
+    its own), and tell the user what they must know about that lighting."""
+    engine_bridge.reshade_scene(scene, _live_objects(scene) if live is None else live)
+    lighting.report(scene)
+
+
 def _reshade_if_lighting_changed(scene, live=None, named=False):
-    """Re-shade the live objects (a valid bake cache re-shades its own) when the lighting changed."""
     if _lighting_changed(scene) or named:
-        engine_bridge.reshade_scene(scene, _live_objects(scene) if live is None else live)
-        lighting.report(scene)
+        reshade_live(scene, live)
 
 
 @persistent

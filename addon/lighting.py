@@ -51,8 +51,7 @@ def _lamp_key(obj):
 def fingerprint(scene) -> str:
     """Digest of every lighting input as it is now (see the module notes)."""
     settings = getattr(scene, "hemishadow", None)
-    parts = [tuple(getattr(settings, n, None) if not hasattr(getattr(settings, n, None), "__len__")
-                   else tuple(getattr(settings, n)) for n in world.DEFAULTS) if settings else None]
+    parts = [world_render._value(getattr(settings, name, None)) for name in world.DEFAULTS] if settings else []
     w = evaluated.of(scene.world)
     if w is not None:
         parts.append(world_render.fingerprint(w))

@@ -164,10 +164,10 @@ def _rendered(scene, world, bands):
 
 
 def _projection_ready(scene, remaining):
-    """Timer callback: a new World projection is cached; re-shade with it."""
-    from . import engine_bridge
+    """Timer callback: a new World projection is cached; re-shade the live objects with it."""
+    from . import handlers
 
-    engine_bridge.reshade_scene(scene)
+    handlers.reshade_live(scene)
     if remaining:
         print(f"hemishadow: World lighting: {remaining} frames left to render")
 

@@ -1,4 +1,4 @@
-"""Operators, one module per job: live.py (compute, live toggle, clear, material) and
+"""Operators, one module per job: live.py (compute, live toggle, clear, material),
 bake.py (bake a frame range to a cache) and world.py (precompute World lighting)."""
 
 import bpy

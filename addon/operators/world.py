@@ -6,7 +6,7 @@ Thin: world_render.precompute does the work."""
 
 import bpy
 
-from .. import engine_bridge, lighting, world_render
+from .. import handlers, lighting, world_render
 
 
 class HEMISHADOW_OT_precompute_world(bpy.types.Operator):
@@ -31,8 +31,8 @@ class HEMISHADOW_OT_precompute_world(bpy.types.Operator):
             return {"CANCELLED"}
         finally:
             wm.progress_end()
-        engine_bridge.reshade_scene(scene)
-        for message in lighting.report(scene):
+        handlers.reshade_live(scene)
+        for message in lighting.messages(scene):
             self.report({"WARNING"}, message)
         self.report({"INFO"}, f"hemishadow: rendered the World for {done} frames")
         return {"FINISHED"}
