@@ -116,14 +116,33 @@ def is_animated(world) -> bool:
     return world is not None and bool(_animated_paths(world))
 
 
-def _value(value):
-    if hasattr(value, "__len__") and not isinstance(value, str):
-        return tuple(round(float(v), 7) for v in value)
-    if isinstance(value, float):
-        return round(value, 7)
+def _value(value, depth=0):
+    """A comparable, hashable summary of a property value (nested structs such as a Color
+    Ramp's elements or an RGB Curves mapping included, a few levels deep)."""
     if isinstance(value, bpy.types.ID):
         return _id_key(value)
+    if isinstance(value, (bpy.types.bpy_struct, bpy.types.bpy_prop_collection)):
+        return _struct_value(value, depth)
+    if hasattr(value, "__len__") and not isinstance(value, str):
+        return tuple(_value(v, depth + 1) for v in value)
+    if isinstance(value, float):
+        return round(value, 7)
     return value
+
+
+def _struct_value(value, depth):
+    if depth > 3:
+        return None
+    if isinstance(value, bpy.types.bpy_prop_collection):
+        return tuple(_value(item, depth + 1) for item in value)
+    items = []
+    for prop in value.bl_rna.properties:
+        name = prop.identifier
+        if name in ("rna_type", "id_data") or (prop.type == "POINTER" and not prop.is_never_none
+                                               and not isinstance(getattr(value, name, None), bpy.types.ID)):
+            continue
+        items.append((name, _value(getattr(value, name, None), depth + 1)))
+    return tuple(items)
 
 
 def _id_key(data):
