@@ -59,7 +59,8 @@ def lamp_power_color(light) -> np.ndarray:
     color = np.array(light.color, np.float64)
     if getattr(light, "use_temperature", False):
         color = color * np.array(light.temperature_color, np.float64)
-    scale = float(light.energy) * 2.0 ** float(getattr(light, "exposure", 0.0)) * float(getattr(light, "diffuse_factor", 1.0))
+    exposure = 2.0 ** float(getattr(light, "exposure", 0.0))
+    scale = float(light.energy) * exposure * float(getattr(light, "diffuse_factor", 1.0))
     return color * scale
 
 

@@ -51,27 +51,14 @@ def _lamp_key(obj):
 def fingerprint(scene) -> str:
     """Digest of every lighting input as it is now (see the module notes)."""
     settings = getattr(scene, "hemishadow", None)
-    parts = [world_render._value(getattr(settings, name, None)) for name in world.DEFAULTS] if settings else []
+    parts = [world_render.value_key(getattr(settings, name, None)) for name in world.DEFAULTS] if settings else []
     w = evaluated.of(scene.world)
     if w is not None:
         parts.append(world_render.fingerprint(w))
         # Animated values themselves (the digest above leaves them out): what this frame shows.
-        parts.append(_animated_values(w))
+        parts.append(world_render.animated_values(w))
     parts.extend(_lamp_key(o) for o in lamps.visible_lamps(scene, ("POINT", "SPOT", "AREA", "SUN")))
     return hashlib.blake2b(repr(parts).encode(), digest_size=16).hexdigest()
-
-
-def _animated_values(w):
-    values = []
-    for anim in world_render._anim_datas(w):
-        owner = w if anim == w.animation_data else w.node_tree
-        for path in sorted(world_render._animated_paths(w) - {"*"}):
-            try:
-                value = owner.path_resolve(path)
-            except (ValueError, AttributeError):
-                continue
-            values.append((path, world_render._value(value)))
-    return tuple(values)
 
 
 def messages(scene) -> list[str]:

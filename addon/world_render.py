@@ -31,7 +31,7 @@ import tempfile
 import bpy
 import numpy as np
 
-__all__ = ["fingerprint", "is_animated", "cached", "nearest", "render_projection", "precompute", "missing_frames",
+__all__ = ["fingerprint", "animated_values", "value_key", "is_animated", "cached", "nearest", "render_projection", "precompute", "missing_frames",
            "schedule", "no_render", "can_render", "clear"]
 
 WIDTH, HEIGHT, SAMPLES, BANDS = 256, 128, 16, 5  # 128 x 64 leaves 3 % noise on the forest HDRI
@@ -169,7 +169,8 @@ def _tree_key(tree, animated, prefix=""):
         inputs = []
         for i, socket in enumerate(node.inputs):
             value = None
-            if not socket.is_linked and hasattr(socket, "default_value") and f"{path}.inputs[{i}].default_value" not in animated:
+            keyed = f"{path}.inputs[{i}].default_value" in animated
+            if not socket.is_linked and hasattr(socket, "default_value") and not keyed:
                 value = _value(socket.default_value)
             inputs.append((socket.identifier, socket.is_linked, value))
         items.append((node.name, node.bl_idname, node.mute, tuple(props), tuple(inputs)))
@@ -192,6 +193,25 @@ def _curves_key(world):
                                for v in driver.driver.variables)))
         keys.append(("nla", len(anim.nla_tracks)))
     return tuple(keys)
+
+
+def animated_values(world) -> tuple:
+    """The current values of the World's animated properties (which `fingerprint` leaves out)."""
+    values = []
+    for owner in (world, world.node_tree):
+        if owner is None or owner.animation_data is None:
+            continue
+        for path in sorted(_animated_paths(world) - {"*"}):
+            try:
+                values.append((path, _value(owner.path_resolve(path))))
+            except (ValueError, AttributeError):
+                continue
+    return tuple(values)
+
+
+def value_key(value):
+    """A comparable summary of a property value (see `fingerprint`)."""
+    return _value(value)
 
 
 def fingerprint(world) -> str:

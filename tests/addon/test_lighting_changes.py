@@ -15,7 +15,6 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 import hemishadow  # noqa: E402
-from mathutils import Vector  # noqa: E402
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
@@ -65,14 +64,16 @@ def expected(obj, scene):
     transfer = engine_bridge._entries[obj.session_uid].transfer
     lighting = engine_bridge.scene_lighting(scene, 5)
     points = mesh_io.to_world(mesh_io.positions_of(obj.data), obj.matrix_world)
-    irradiance = hemishadow.shade(transfer, lighting) + lamps.lamp_irradiance(transfer, points, lamps.scene_lamps(scene))
+    lamp_light = lamps.lamp_irradiance(transfer, points, lamps.scene_lamps(scene))
+    irradiance = hemishadow.shade(transfer, lighting) + lamp_light
     return np.asarray(obj.hemishadow.albedo) / math.pi * irradiance
 
 
 def count_solves(monkeypatch):
     calls = []
     original = hemishadow.TransferSolver.solve
-    monkeypatch.setattr(hemishadow.TransferSolver, "solve", lambda self, *a, **k: calls.append(1) or original(self, *a, **k))
+    monkeypatch.setattr(hemishadow.TransferSolver, "solve",
+                        lambda self, *a, **k: calls.append(1) or original(self, *a, **k))
     return calls
 
 
