@@ -331,17 +331,22 @@ def _probe_scene(world_copy, frame):
     return scene, camera, camera_data
 
 
+#: The Render Result slot our renders go to, when the user has a Render Result.
+SLOT_NAME = "Hemishadow World Lighting"
+
+
 @contextlib.contextmanager
 def _own_render_slot():
-    """Render into a slot of our own, so the user's Render Result slots keep their images;
-    a Render Result that did not exist before is removed afterwards."""
+    """Render into a slot of our own, so the images in the user's Render Result slots stay
+    and the slot shown is restored; a Render Result that did not exist before is removed
+    afterwards. (Blender cannot remove the slot last rendered into without an Image editor,
+    so that one slot stays for the session; Render Results are not saved in files.)"""
     result = bpy.data.images.get("Render Result")
     previous = None
     if result is not None and result.type == "RENDER_RESULT":
         slots = result.render_slots
         previous = slots.active_index
-        ours = next((s for s in slots if s.name == "Hemishadow World"), None) or slots.new(name="Hemishadow World")
-        slots.active = ours
+        slots.active = next((s for s in slots if s.name == SLOT_NAME), None) or slots.new(name=SLOT_NAME)
     try:
         yield
     finally:

@@ -264,3 +264,21 @@ def test_fingerprint_sees_colour_ramp_and_sky_edits(scene):
     nodes["Background"].location = (500, 0)  # moving a node changes nothing emitted
     digests.add(world_render.fingerprint(w))
     assert len(digests) == 3
+
+
+def test_a_previous_render_result_keeps_its_slots(scene, tmp_path):
+    scene.render.engine = "BLENDER_WORKBENCH"
+    scene.render.resolution_x = scene.render.resolution_y = 8
+    camera = bpy.data.objects.new("camera", bpy.data.cameras.new("camera"))
+    scene.collection.objects.link(camera)
+    scene.camera = camera
+    bpy.ops.render.render()
+    result = bpy.data.images["Render Result"]
+    result.render_slots.active_index = 2
+    names = [slot.name for slot in result.render_slots]
+    w = gradient_world(scene, 1.0, (0, 0, 0.5))
+    world.scene_lighting(scene, 5, settings())
+    w.node_tree.nodes["Math"].inputs[1].default_value = 2.0
+    world.scene_lighting(scene, 5, settings())  # a second render reuses our slot
+    assert [slot.name for slot in result.render_slots] == names + [world_render.SLOT_NAME]
+    assert result.render_slots.active_index == 2  # the slot shown is the user's
