@@ -26,12 +26,15 @@ __all__ = ["shade", "fingerprint", "report", "messages", "check_before_render"]
 _reported: dict[str, tuple] = {}
 
 
-def shade(scene, transfer, lighting, albedo, vertices):
-    """Radiance (V, 3): environment SH `lighting` (K, 3) plus the scene's lamps at `vertices`."""
+def shade(scene, transfer, lighting, albedo, vertices, found=None):
+    """Radiance (V, 3): environment SH `lighting` (K, 3) plus the lamps at `vertices`.
+    found: the lamps (`lamps.scene_lamps(scene)`, read from Blender: main thread only); pass
+    them read beforehand to call this from a worker thread (the rest is numpy and the engine)."""
     import hemishadow
 
     radiance = hemishadow.shade(transfer, lighting, albedo)
-    found = lamps.scene_lamps(scene)
+    if found is None:
+        found = lamps.scene_lamps(scene)
     if found and vertices is not None:
         radiance += np.asarray(albedo, np.float32) / np.pi * lamps.lamp_irradiance(transfer, vertices, found)
     return radiance

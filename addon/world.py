@@ -148,9 +148,15 @@ def _rendered(scene, world, bands):
     frame = scene.frame_current
     world = world.original
     found = world_render.cached(world, frame)
-    if found is None and world_render.can_render():
-        found = world_render.render_projection(world, frame)
     note = ""
+    if found is None and world_render.can_render():
+        try:
+            found = world_render.render_projection(world, frame)
+        except (RuntimeError, ValueError, OSError) as error:
+            note = f"World {world.name!r} could not be rendered for lighting: {error}"
+            found = world_render.nearest(world, frame)
+            if found is None:
+                found = np.zeros((world_render.BANDS ** 2, 3))
     if found is None:
         world_render.schedule(scene, _projection_ready)
         found = world_render.nearest(world, frame)

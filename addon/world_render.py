@@ -308,7 +308,11 @@ def _probe_scene(world_copy, frame):
     scene.world = world_copy
     scene.frame_start = scene.frame_end = scene.frame_current = int(frame)
     render = scene.render
-    render.engine = "CYCLES"
+    try:
+        render.engine = "CYCLES"
+    except TypeError:
+        bpy.data.scenes.remove(scene)
+        raise RuntimeError("Cycles is not available (enable the Cycles add-on) to render the World") from None
     render.resolution_x, render.resolution_y, render.resolution_percentage = WIDTH, HEIGHT, 100
     render.use_compositing = render.use_sequencer = False
     render.image_settings.file_format = "OPEN_EXR"
