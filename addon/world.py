@@ -100,10 +100,11 @@ def _settings_value(settings, name):
 def scene_lighting(scene, bands=5, settings=None) -> np.ndarray:
     """Lighting SH of the scene: float32 (bands*bands, 3), radiance coefficients.
 
-    Environment (radiance, per `lighting_source`): the World's Environment Texture when one
-    feeds the World output's Background (its Mapping node rotation and Background strength
-    honoured), else the built-in HDRI named by `hdri`, else a uniform sky of radiance
-    `uniform_color` (band 0 only: L_00 = sqrt(4 pi) c, so an open surface gets irradiance pi c).
+    Environment (radiance, per `lighting_source`): what the World emits (see the module notes:
+    an Environment Texture or a plain colour directly, any other node setup through a Cycles
+    render), the built-in HDRI named by `hdri` when there is no World or when asked, else a
+    uniform sky of radiance `uniform_color` (band 0 only: L_00 = sqrt(4 pi) c, so an open
+    surface gets irradiance pi c). What the user must know about it goes to `notes(scene)`.
     The environment is scaled by `intensity` and rotated by `rotation` radians about +Z
     (counter-clockwise seen from above: what lit +X then lights cos(r) X + sin(r) Y).
 
@@ -148,25 +149,22 @@ def _rendered(scene, world, bands):
     frame = scene.frame_current
     world = world.original
     found = world_render.cached(world, frame)
-    note = ""
-    if found is None and world_render.can_render():
+    if found is not None:
+        return found[: bands * bands], ""
+    if world_render.can_render():
         try:
-            found = world_render.render_projection(world, frame)
+            return world_render.render_projection(world, frame)[: bands * bands], ""
         except (RuntimeError, ValueError, OSError) as error:
             note = f"World {world.name!r} could not be rendered for lighting: {error}"
-            found = world_render.nearest(world, frame)
-            if found is None:
-                found = np.zeros((world_render.BANDS ** 2, 3))
-    if found is None:
+    else:
         world_render.schedule(scene, _projection_ready)
-        found = world_render.nearest(world, frame)
-        what = "an older projection" if found is not None else "no World light"
         animated = " (animated World: use Precompute World Lighting before rendering)" \
             if world_render.is_animated(world) else ""
-        note = f"World {world.name!r} not rendered for frame {frame} yet: {what} meanwhile{animated}"
-        if found is None:
-            found = np.zeros((world_render.BANDS ** 2, 3))
-    return found[: bands * bands].astype(np.float64), note
+        note = f"World {world.name!r} not rendered for frame {frame} yet{animated}"
+    found = world_render.nearest(world, frame)
+    if found is None:
+        return np.zeros((bands * bands, 3)), note + ": no World light meanwhile"
+    return found[: bands * bands], note + ": its nearest projection meanwhile"
 
 
 def _projection_ready(scene, remaining):
@@ -193,11 +191,14 @@ def lighting_source(scene, settings=None) -> LightingSource:
         if builtin is not None:
             builtin.label += fallback_note
             if fallback_note:
-                builtin.note = f"the scene has no World: lit by the built-in HDRI {builtin.label.split(': ')[1]}"
+                builtin.note = f"the scene has no World: lit by the built-in HDRI '{os.path.basename(builtin.path)}'"
             return builtin
-        fallback_note = " (no built-in HDRI found)"
+        fallback_note += " (no built-in HDRI found)"
     color = np.array(_settings_value(settings, "uniform_color"), np.float64)
-    return LightingSource("UNIFORM", f"Uniform sky{fallback_note}", scale=color)
+    source = LightingSource("UNIFORM", f"Uniform sky{fallback_note}", scale=color)
+    if fallback_note:
+        source.note = f"lit by a uniform sky{fallback_note}"
+    return source
 
 
 def sun_lobe(direction, irradiance, angle, bands=5) -> np.ndarray:
