@@ -427,6 +427,12 @@ def schedule(scene, on_ready=None):
         bpy.app.timers.register(_tick, first_interval=0.05)
 
 
+def _playing() -> bool:
+    """True during playback: a render of about a second per tick would stall it."""
+    windows = getattr(bpy.context.window_manager, "windows", [])
+    return any(w.screen is not None and w.screen.is_animation_playing for w in windows)
+
+
 def _tick():
     while _scheduled:
         name, on_ready = next(iter(_scheduled.items()))
@@ -434,7 +440,7 @@ def _tick():
         if scene is None or scene.world is None:
             _scheduled.pop(name)
             continue
-        if not can_render():
+        if not can_render() or _playing():
             return 0.5
         now = missing_frames(scene, [scene.frame_current])
         todo = now or missing_frames(scene)
