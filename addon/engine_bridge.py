@@ -42,6 +42,8 @@ class Result:
 
 # Keyed by ID.session_uid: stable while the object lives, unlike its name.
 _entries: dict[int, _Entry] = {}
+#: World-space positions the last transfer was computed on (lamps light each vertex from there).
+_positions: dict[int, np.ndarray] = {}
 #: object name -> (vertex count, Blender I/O seconds, engine seconds) of its last computation.
 last_timings: dict[str, tuple[int, float, float]] = {}
 
@@ -103,7 +105,7 @@ def compute_object(obj, depsgraph, scene, *, force=False, lighting=None):
         entry.transfer, entry.fingerprint = None, None  # never keep a stale pair if solve raises
         transfer = entry.solver.solve(vertices, normals, view)
         entry.transfer, entry.fingerprint = transfer, fingerprint
-        result = _shade(obj, scene, transfer, lighting)
+        result = _shade(obj, scene, transfer, lighting, vertices)
         result.io_seconds, result.engine_seconds = t1 - t0, time.perf_counter() - t1
         return result
 
@@ -124,12 +126,18 @@ def named_errors(obj):
         raise named from error
 
 
-def _shade(obj, scene, transfer, lighting=None):
+def _shade(obj, scene, transfer, lighting=None, vertices=None):
+    """Environment and suns (`lighting`, default the scene's) plus the lamps at `vertices`
+    (default: the positions of the object's last computation)."""
     import hemishadow
+
+    from . import lighting as scene_lights
 
     if lighting is None:
         lighting = scene_lighting(scene, obj.hemishadow.band_count)
-    radiance = hemishadow.shade(transfer, lighting, _albedo(obj))
+    if vertices is not None:
+        _positions[obj.session_uid] = vertices
+    radiance = scene_lights.shade(scene, transfer, lighting, _albedo(obj), _positions.get(obj.session_uid))
     return Result(transfer, hemishadow.ambient_occlusion(transfer), radiance)
 
 
@@ -289,12 +297,17 @@ def reshade_object(obj, scene, lighting=None):
     return True
 
 
-def reshade_scene(scene):
-    """Re-shade every object of the scene that has transfer vectors; errors go to the status."""
-    for obj in scene.objects:
+def reshade_scene(scene, objects=None):
+    """Re-shade every object of the scene (or of `objects`) that has transfer vectors; errors
+    go to the status."""
+    lighting = {}
+    for obj in scene.objects if objects is None else objects:
         if obj.session_uid in _entries:
             try:
-                reshade_object(obj, scene)
+                bands = obj.hemishadow.band_count
+                if bands not in lighting:
+                    lighting[bands] = scene_lighting(scene, bands)
+                reshade_object(obj, scene, lighting[bands])
             except (ValueError, RuntimeError) as error:
                 set_status(obj, str(error))
 
@@ -303,8 +316,10 @@ def forget(obj=None):
     """Drop the solver and transfer of one object (all when None)."""
     if obj is None:
         _entries.clear()
+        _positions.clear()
     else:
         _entries.pop(obj.session_uid, None)
+        _positions.pop(obj.session_uid, None)
 
 
 def forget_positions():
@@ -321,6 +336,7 @@ def prune():
     alive = {o.session_uid for o in bpy.data.objects}
     for uid in [u for u in _entries if u not in alive]:
         del _entries[uid]
+        _positions.pop(uid, None)
 
 
 def has_transfer(obj):
