@@ -258,8 +258,11 @@ def _same_shading(cache: BakeCache, obj, scene) -> bool:
     """Lighting and albedo as at the bake: the cached radiance can be copied as it is."""
     stored = np.asarray(cache.meta.get("lighting"), np.float32)
     current = _current_lighting(scene, int(round(np.sqrt(stored.shape[0]))))
+    from . import lamps
+
     return (stored.shape == current.shape and np.array_equal(stored, current)
-            and np.array_equal(np.asarray(cache.meta.get("albedo"), np.float32), _albedo(obj)))
+            and np.array_equal(np.asarray(cache.meta.get("albedo"), np.float32), _albedo(obj))
+            and cache.meta.get("lamps", "") == lamps.lamps_key(scene))
 
 
 def is_valid(obj, scene, frame: int | None = None) -> bool:
@@ -302,9 +305,16 @@ def apply_cached(obj, frame: int, scene=None) -> bool:
 def _reshade(obj, scene, cache: BakeCache, i: int) -> np.ndarray:
     import hemishadow
 
+    from . import evaluated, lamps
+
     transfer = cache.transfer[i].astype(np.float32)
     lighting = _current_lighting(scene, int(round(np.sqrt(transfer.shape[1]))))
-    return hemishadow.shade(transfer, lighting, _albedo(obj))
+    radiance = hemishadow.shade(transfer, lighting, _albedo(obj))
+    found = lamps.scene_lamps(scene)
+    if found:   # lamps light each vertex from where it is this frame
+        vertices, _, _ = mesh_io.read_evaluated(obj, evaluated.depsgraph())
+        radiance += _albedo(obj) / np.pi * lamps.lamp_irradiance(transfer, vertices, found)
+    return radiance
 
 
 # ---------------------------------------------------------------------------------------

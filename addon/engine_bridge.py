@@ -29,7 +29,7 @@ class _Entry:
     solver: object
     fingerprint: int | None = None  # hash of the positions (and view) in the object's frame, as solved
     solved: np.ndarray | None = None  # transfer in the object's frame
-    rotation: bytes | None = None  # the frame's rotation `transfer` was turned by
+    rotation: tuple | None = None  # the frame's rotation and offset `transfer` was turned and shaded at
     transfer: np.ndarray | None = None  # in world space
 
 
@@ -44,6 +44,8 @@ class Result:
 
 # Keyed by ID.session_uid: stable while the object lives, unlike its name.
 _entries: dict[int, _Entry] = {}
+#: World-space positions the last transfer was computed on (lamps light each vertex from there).
+_positions: dict[int, np.ndarray] = {}
 #: object name -> (vertex count, Blender I/O seconds, engine seconds) of its last computation.
 last_timings: dict[str, tuple[int, float, float]] = {}
 
@@ -106,7 +108,8 @@ def compute_object(obj, depsgraph, scene, *, force=False, lighting=None):
         t1 = time.perf_counter()
         entry = _solver_for(obj, vertices, triangles, frame.matrix)
         fingerprint = hash((vertices.tobytes(), None if view is None else view.tobytes()))
-        rotation = None if frame.rotation is None else frame.rotation.tobytes()
+        # Where the frame is in the world: turning changes the transfer, moving the lamps' light.
+        rotation = None if frame.rotation is None else (frame.rotation.tobytes(), frame.offset.tobytes())
         solved = entry.solved is not None and entry.fingerprint == fingerprint
         written = mesh_io.RADIANCE in obj.data.attributes  # gone after Clear, or undone
         if not force and written and solved and entry.transfer is not None and entry.rotation == rotation:
@@ -115,7 +118,7 @@ def compute_object(obj, depsgraph, scene, *, force=False, lighting=None):
             entry.solved, entry.fingerprint, entry.transfer = None, None, None  # no stale pair if solve raises
             entry.solved, entry.fingerprint = entry.solver.solve(vertices, normals, view), fingerprint
         entry.transfer, entry.rotation = to_world_transfer(entry.solved, frame.rotation), rotation
-        result = _shade(obj, scene, entry.transfer, lighting)
+        result = _shade(obj, scene, entry.transfer, lighting, mesh_io.frame_to_world(vertices, frame))
         result.io_seconds, result.engine_seconds = t1 - t0, time.perf_counter() - t1
         return result
 
@@ -148,12 +151,18 @@ def named_errors(obj):
         raise named from error
 
 
-def _shade(obj, scene, transfer, lighting=None):
+def _shade(obj, scene, transfer, lighting=None, vertices=None):
+    """Environment and suns (`lighting`, default the scene's) plus the lamps at `vertices`
+    (default: the positions of the object's last computation)."""
     import hemishadow
+
+    from . import lighting as scene_lights
 
     if lighting is None:
         lighting = scene_lighting(scene, obj.hemishadow.band_count)
-    radiance = hemishadow.shade(transfer, lighting, _albedo(obj))
+    if vertices is not None:
+        _positions[obj.session_uid] = vertices
+    radiance = scene_lights.shade(scene, transfer, lighting, _albedo(obj), _positions.get(obj.session_uid))
     return Result(transfer, hemishadow.ambient_occlusion(transfer), radiance)
 
 
@@ -313,12 +322,17 @@ def reshade_object(obj, scene, lighting=None):
     return True
 
 
-def reshade_scene(scene):
-    """Re-shade every object of the scene that has transfer vectors; errors go to the status."""
-    for obj in scene.objects:
+def reshade_scene(scene, objects=None):
+    """Re-shade every object of the scene (or of `objects`) that has transfer vectors; errors
+    go to the status."""
+    lighting = {}
+    for obj in scene.objects if objects is None else objects:
         if obj.session_uid in _entries:
             try:
-                reshade_object(obj, scene)
+                bands = obj.hemishadow.band_count
+                if bands not in lighting:
+                    lighting[bands] = scene_lighting(scene, bands)
+                reshade_object(obj, scene, lighting[bands])
             except (ValueError, RuntimeError) as error:
                 set_status(obj, str(error))
 
@@ -327,8 +341,10 @@ def forget(obj=None):
     """Drop the solver and transfer of one object (all when None)."""
     if obj is None:
         _entries.clear()
+        _positions.clear()
     else:
         _entries.pop(obj.session_uid, None)
+        _positions.pop(obj.session_uid, None)
 
 
 def forget_positions():
@@ -345,6 +361,7 @@ def prune():
     alive = {o.session_uid for o in bpy.data.objects}
     for uid in [u for u in _entries if u not in alive]:
         del _entries[uid]
+        _positions.pop(uid, None)
 
 
 def has_transfer(obj):

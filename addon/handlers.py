@@ -7,6 +7,13 @@ Loops are impossible by construction, on two levels:
   depsgraph_update_post with that object; engine_bridge then sees the same positions as
   last time and computes and writes nothing.
 
+Lighting that changes without a depsgraph update naming it (keyframed or driven lamps and
+World inputs, in playback and in animation renders) is caught by comparing a cheap
+fingerprint of every lighting input (lighting.py) after each frame change and update; a
+change re-shades from the stored transfer. Handlers never render: a World that needs a
+Cycles render is rendered from a timer (world_render.py), and `render_init` reports frames
+of an animated World that were not precomputed.
+
 No error leaves a handler: engine and input errors go to the object's status line and the
 console.
 """
@@ -14,9 +21,11 @@ console.
 import bpy
 from bpy.app.handlers import persistent
 
-from . import engine_bridge
+from . import engine_bridge, evaluated, lighting, world_render
 
 _busy = False
+#: scene name -> lighting.fingerprint the objects were last shaded with.
+_lighting_seen: dict[str, str] = {}
 
 
 def _cache_handled(obj, scene):
@@ -45,11 +54,14 @@ def _live_and_idle(handler):
 
     def guarded(scene, depsgraph):
         global _busy
-        if _busy or not scene.hemishadow.live:
+        if _busy or not scene.hemishadow.live or world_render.probing():
             return
         _busy = True
         try:
-            handler(scene, depsgraph)
+            # Blender cannot start a render from a handler; in animation renders only the
+            # render's depsgraph holds this frame's lighting.
+            with world_render.no_render(), evaluated.using(depsgraph):
+                handler(scene, depsgraph)
         finally:
             _busy = False
 
@@ -57,10 +69,34 @@ def _live_and_idle(handler):
     return guarded
 
 
+def _lighting_changed(scene):
+    """True (once) when any lighting input differs from the last time: keyframed or driven
+    World inputs, moved, hidden or edited lamps, the scene's lighting settings."""
+    now = lighting.fingerprint(scene)
+    if _lighting_seen.get(scene.name) == now:
+        return False
+    _lighting_seen[scene.name] = now
+    return True
+
+
+def reshade_live(scene, live=None):
+    """Re-shade the live objects with the lighting as it is now (a valid bake cache re-shades
+    its own), and tell the user what they must know about that lighting."""
+    engine_bridge.reshade_scene(scene, _live_objects(scene) if live is None else live)
+    lighting.report(scene)
+
+
+def _reshade_if_lighting_changed(scene, live=None, named=False):
+    if _lighting_changed(scene) or named:
+        reshade_live(scene, live)
+
+
 @persistent
 @_live_and_idle
 def on_frame_change(scene, depsgraph):
-    _report(engine_bridge.update_scene(scene, depsgraph, _live_objects(scene)))
+    live = _live_objects(scene)
+    _report(engine_bridge.update_scene(scene, depsgraph, live))
+    _reshade_if_lighting_changed(scene, live)
 
 
 def _deformed_objects(scene, depsgraph):
@@ -80,13 +116,21 @@ def on_depsgraph_update(scene, depsgraph):
     objects = [o for o in _deformed_objects(scene, depsgraph) if not _cache_handled(o, scene)]
     if objects:
         _report(engine_bridge.update_scene(scene, depsgraph, objects))
-    if _lighting_updated(depsgraph):
-        engine_bridge.reshade_scene(scene)
+    _reshade_if_lighting_changed(scene, named=_lighting_updated(depsgraph))
 
 
 @persistent
 def on_load(_):
     engine_bridge.forget()
+    _lighting_seen.clear()
+
+
+@persistent
+def on_render_init(scene, *_):
+    """Renders cannot render the World themselves: say which frames have no projection."""
+    if world_render.probing() or not scene.hemishadow.live:
+        return
+    lighting.check_before_render(scene)
 
 
 @persistent
@@ -98,6 +142,7 @@ _HANDLERS = (
     (bpy.app.handlers.frame_change_post, on_frame_change),
     (bpy.app.handlers.depsgraph_update_post, on_depsgraph_update),
     (bpy.app.handlers.load_post, on_load),
+    (bpy.app.handlers.render_init, on_render_init),
     (bpy.app.handlers.undo_post, on_undo_redo),
     (bpy.app.handlers.redo_post, on_undo_redo),
 )

@@ -166,6 +166,13 @@ def object_frame(matrix) -> Frame:
     return Frame(rotation, frame, m[:3, 3].copy())
 
 
+def frame_to_world(vertices, frame) -> np.ndarray:
+    """Positions in an object's frame, back in world space (float32)."""
+    if frame.rotation is None:
+        return vertices
+    return np.ascontiguousarray(vertices @ frame.rotation.T + frame.offset, dtype=np.float32)
+
+
 def read_in_frame(obj, depsgraph):
     """(vertices (V, 3) float32 in the object's frame (see `object_frame`), triangles (M, 3)
     uint32, None, Frame): what the live path computes on. The frame never mirrors, so the

@@ -70,6 +70,9 @@ class HEMISHADOW_PT_lighting(_Sidebar, bpy.types.Panel):
         from . import world
 
         layout.label(text=world.lighting_source(context.scene).label, icon="WORLD")
+        for message in world.notes(context.scene):
+            layout.label(text=message, icon="ERROR")
+        layout.operator("hemishadow.precompute_world", icon="WORLD")
 
 
 class HEMISHADOW_PT_object(_Sidebar, bpy.types.Panel):

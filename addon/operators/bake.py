@@ -18,7 +18,7 @@ import numpy as np
 
 import bpy
 
-from .. import cache, engine_bridge, mesh_io
+from .. import cache, engine_bridge, lamps, mesh_io, world_render
 
 __all__ = ["BakeJob", "BakeResult", "bake_range", "HEMISHADOW_OT_bake_animation", "HEMISHADOW_OT_clear_bake", "classes"]
 
@@ -75,7 +75,10 @@ class BakeJob:
         self._frames: dict[str, dict[int, tuple]] = {obj.name: {} for obj in self.objects}
         self._meta = {obj.name: self._object_meta(obj) for obj in self.objects}
         self._solvers = {}
+        # An animated World is rendered for every frame now: the frame handlers cannot.
+        world_render.precompute(self.scene, range(self.frame_start, self.frame_end + 1))
         self._shading = {obj.name: _shading_of(obj, self.scene) for obj in self.objects}
+        self._lamps: dict[int, tuple] = {}   # frame -> (lamps, their key)
         self._executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="hemishadow-bake")
         self._baking = cache.baking()
         self._baking.__enter__()
@@ -106,9 +109,11 @@ class BakeJob:
         if known is None or known[0] != key:
             known = self._solvers[obj.name] = (key, _make_solver(obj, vertices, triangles))
         solver = known[1]
-        lighting, albedo = self._shading[obj.name]
+        _, albedo = self._shading[obj.name]
+        lighting = engine_bridge.scene_lighting(self.scene, obj.hemishadow.band_count)   # this frame's
         view = engine_bridge._view_directions(obj, self.scene, vertices)   # None for diffuse
-        return FrameInput(solver, vertices, normals, view, lighting, albedo)
+        frame_lamps = self._lamps[self.scene.frame_current][0]
+        return FrameInput(solver, vertices, normals, view, lighting, albedo, frame_lamps)
 
     def _object_meta(self, obj) -> dict:
         return dict(version=cache.VERSION, object=obj.name, frame_start=self.frame_start,
@@ -138,6 +143,8 @@ class BakeJob:
         t0 = time.perf_counter()
         self.scene.frame_set(frame)
         depsgraph = bpy.context.evaluated_depsgraph_get()
+        found = lamps.scene_lamps(self.scene)
+        self._lamps[frame] = (found, lamps.lamps_key(self.scene))
         inputs = [self._frame_input(obj, depsgraph) for obj in self.objects]
         self.result.blender_seconds += time.perf_counter() - t0
         self._pending.append((frame, self._executor.submit(_compute_frame, inputs, self.store_transfer)))
@@ -197,25 +204,29 @@ class BakeJob:
         first = frames[self.frame_start]
         meta["lighting"] = np.asarray(first[3], np.float32).tolist()
         meta["albedo"] = np.asarray(first[4], np.float32).tolist()
+        meta["lamps"] = self._lamps[self.frame_start][1]
         return cache.BakeCache(self.frame_start, radiance, ao, transfer, meta)
 
 
 class FrameInput:
     """One object's arrays for one frame, and the solver that turns them into transfer."""
 
-    __slots__ = ("solver", "vertices", "normals", "view", "lighting", "albedo")
+    __slots__ = ("solver", "vertices", "normals", "view", "lighting", "albedo", "lamps")
 
-    def __init__(self, solver, vertices, normals, view, lighting, albedo):
+    def __init__(self, solver, vertices, normals, view, lighting, albedo, lamps=()):
         self.solver, self.vertices, self.normals, self.view = solver, vertices, normals, view
-        self.lighting, self.albedo = lighting, albedo
+        self.lighting, self.albedo, self.lamps = lighting, albedo, lamps
 
     def compute(self):
         """Worker thread: (transfer (V, K), radiance (V, 3), ao (V,))."""
         import hemishadow
 
         transfer = self.solver.solve(self.vertices, self.normals, view=self.view)
-        return (transfer, hemishadow.shade(transfer, self.lighting, self.albedo),
-                hemishadow.ambient_occlusion(transfer))
+        radiance = hemishadow.shade(transfer, self.lighting, self.albedo)
+        if self.lamps:   # numpy only: safe in the worker
+            radiance += np.asarray(self.albedo, np.float32) / np.pi * lamps.lamp_irradiance(
+                transfer, self.vertices, self.lamps)
+        return transfer, radiance, hemishadow.ambient_occlusion(transfer)
 
 
 def _compute_frame(inputs, store_transfer):

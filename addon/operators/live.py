@@ -41,6 +41,10 @@ class HEMISHADOW_OT_compute(bpy.types.Operator):
             return {"CANCELLED"}
         if errors or warnings:
             self.report({"WARNING"}, "; ".join(list(errors.values()) + warnings))
+        from .. import lighting
+
+        for message in lighting.report(context.scene):  # fallbacks, lamps not represented
+            self.report({"WARNING"}, message)
         return {"FINISHED"}
 
 

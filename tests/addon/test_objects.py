@@ -181,6 +181,27 @@ def test_turning_or_mirroring_solves_nothing(scene, monkeypatch):
     np.testing.assert_allclose(attribute(obj, mesh_io.AO), ao, atol=1e-5)
 
 
+def test_moving_turned_object_is_reshaded_for_lamps(scene, monkeypatch):
+    """Moving a turned object solves nothing, but the lamps' light at its vertices changes."""
+    obj = add_object("monkey", monkey_mesh())
+    obj.rotation_euler = (0.4, -1.1, 2.3)
+    lamp = bpy.data.objects.new("lamp", bpy.data.lights.new("lamp", "POINT"))
+    lamp.data.energy = 200.0
+    lamp.location = (0.0, -3.0, 0.0)
+    scene.collection.objects.link(lamp)
+    scene.hemishadow.live = True
+    scene.frame_set(2)
+    before = attribute(obj, mesh_io.RADIANCE)
+    solves = count_solves(monkeypatch)
+    obj.location = (0.0, 2.0, 0.0)  # away from the lamp
+    scene.frame_set(3)
+    assert solves == []
+    moved = attribute(obj, mesh_io.RADIANCE)
+    assert np.abs(moved - before).max() > 0.05
+    bpy.ops.hemishadow.compute()  # solved again from scratch at the new place
+    np.testing.assert_allclose(moved, attribute(obj, mesh_io.RADIANCE), atol=1e-5)
+
+
 def test_turned_phong_object_sees_the_camera_from_its_frame(scene):
     """Turning a Phong object and its camera together turns its transfer (the view direction
     goes into the object's frame as well)."""
