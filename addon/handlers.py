@@ -14,17 +14,15 @@ console.
 import bpy
 from bpy.app.handlers import persistent
 
-from . import engine_bridge
+from . import cache, engine_bridge
 
 _busy = False
 
 
-def _cache_handled(obj, scene):
+def _cache_handled(obj, scene, depsgraph):
     """True when a bake cache supplied this frame (cache.py, by the bake helper)."""
-    from . import cache
-
     try:
-        return cache.handled(obj, scene)
+        return cache.handled(obj, scene, depsgraph)
     except (ValueError, RuntimeError, OSError) as error:
         print(f"hemishadow: {obj.name}: bake cache not used: {error}")
         return False
@@ -35,8 +33,8 @@ def _report(errors):
         print(f"hemishadow: {name}: {message}")
 
 
-def _live_objects(scene):
-    return [o for o in engine_bridge.enabled_objects(scene) if not _cache_handled(o, scene)]
+def _live_objects(scene, depsgraph):
+    return [o for o in engine_bridge.enabled_objects(scene) if not _cache_handled(o, scene, depsgraph)]
 
 
 def _live_and_idle(handler):
@@ -60,7 +58,9 @@ def _live_and_idle(handler):
 @persistent
 @_live_and_idle
 def on_frame_change(scene, depsgraph):
-    _report(engine_bridge.update_scene(scene, depsgraph, _live_objects(scene)))
+    objects = _live_objects(scene, depsgraph)
+    _report(engine_bridge.update_scene(scene, depsgraph, objects))
+    cache.note_stale(objects)
 
 
 def _deformed_objects(scene, depsgraph):
@@ -77,9 +77,10 @@ def _lighting_updated(depsgraph):
 @persistent
 @_live_and_idle
 def on_depsgraph_update(scene, depsgraph):
-    objects = [o for o in _deformed_objects(scene, depsgraph) if not _cache_handled(o, scene)]
+    objects = [o for o in _deformed_objects(scene, depsgraph) if not _cache_handled(o, scene, depsgraph)]
     if objects:
         _report(engine_bridge.update_scene(scene, depsgraph, objects))
+        cache.note_stale(objects)
     if _lighting_updated(depsgraph):
         engine_bridge.reshade_scene(scene)
 
@@ -100,7 +101,7 @@ _HANDLERS = (
     (bpy.app.handlers.load_post, on_load),
     (bpy.app.handlers.undo_post, on_undo_redo),
     (bpy.app.handlers.redo_post, on_undo_redo),
-)
+) + cache.HANDLERS   # stale-cache checks: playback and render start, edits, undo, loads
 
 
 def register():

@@ -18,7 +18,7 @@ import numpy as np
 
 import bpy
 
-from .. import cache, engine_bridge, mesh_io
+from .. import cache, engine_bridge, mesh_io, staleness
 
 __all__ = ["BakeJob", "BakeResult", "bake_range", "HEMISHADOW_OT_bake_animation", "HEMISHADOW_OT_clear_bake", "classes"]
 
@@ -52,7 +52,8 @@ class BakeJob:
     store_transfer: keep the transfer vectors (float16) so lighting can change after the bake.
     progress: called on the main thread as progress(frames_done, frame_count).
     cancel: a threading.Event; when set, the job stops after the frame in flight and saves nothing.
-    Raises ValueError for objects that cannot be baked (not meshes, in Edit Mode, empty range).
+    Raises ValueError for objects that cannot be baked (not meshes, in Edit Mode, empty range)
+    and for a cache folder that cannot be written, before any frame is computed.
     """
 
     def __init__(self, context_or_scene, objects, frame_start, frame_end, *, location="FILE", directory=None,
@@ -67,12 +68,13 @@ class BakeJob:
         self.result = BakeResult()
         self._check()
         if location == "FILE":
-            for obj in self.objects:   # fail now, not after the last frame, when `//` has no folder
-                cache._absolute(cache.cache_path(obj, directory))
+            for obj in self.objects:   # fail now, not after the last frame
+                cache.check_directory(obj, directory)
         self._restore_frame = self.scene.frame_current
         self._next_frame = self.frame_start
         self._pending: list[tuple[int, Future]] = []
         self._frames: dict[str, dict[int, tuple]] = {obj.name: {} for obj in self.objects}
+        self._fingerprints: dict[str, dict[int, np.ndarray]] = {obj.name: {} for obj in self.objects}
         self._meta = {obj.name: self._object_meta(obj) for obj in self.objects}
         self._solvers = {}
         self._shading = {obj.name: _shading_of(obj, self.scene) for obj in self.objects}
@@ -108,12 +110,14 @@ class BakeJob:
         solver = known[1]
         lighting, albedo = self._shading[obj.name]
         view = engine_bridge._view_directions(obj, self.scene, vertices)   # None for diffuse
+        self._fingerprints[obj.name][self.scene.frame_current] = staleness.fingerprint(
+            vertices, cache._eye(obj, self.scene))
         return FrameInput(solver, vertices, normals, view, lighting, albedo)
 
     def _object_meta(self, obj) -> dict:
         return dict(version=cache.VERSION, object=obj.name, frame_start=self.frame_start,
                     signature=cache.signature(obj), rest=cache.rest_signature(obj),
-                    settings=cache.transfer_settings(obj))
+                    settings=cache.transfer_settings(obj), inputs=staleness.inputs(obj, self.scene))
 
     # -- the steps --------------------------------------------------------------------------
 
@@ -197,7 +201,8 @@ class BakeJob:
         first = frames[self.frame_start]
         meta["lighting"] = np.asarray(first[3], np.float32).tolist()
         meta["albedo"] = np.asarray(first[4], np.float32).tolist()
-        return cache.BakeCache(self.frame_start, radiance, ao, transfer, meta)
+        fingerprint = np.stack([self._fingerprints[obj.name][f] for f in order])
+        return cache.BakeCache(self.frame_start, radiance, ao, transfer, meta, fingerprint)
 
 
 class FrameInput:
