@@ -376,6 +376,8 @@ def note_stale(objects) -> None:
     """After the live path computed `objects` (and set their status lines): prefix the status of
     those whose cache is stale with that news, so it is not lost under the vertex counts."""
     for obj in objects:
+        if not obj.get(TOKEN_KEY):
+            continue
         reason = stale_reason(obj)
         if reason is not None:
             note = _note(reason)
@@ -396,11 +398,9 @@ def draw_status(layout, obj) -> None:
 def check_scene(scene) -> list[str]:
     """Compare the input digests of every enabled object's cache with the scene now (playback
     and render start), before any frame is evaluated; returns the names of stale ones."""
-    from . import engine_bridge
-
     _inputs_checked.clear()
     found = []
-    for obj in engine_bridge.enabled_objects(scene):
+    for obj in _enabled(scene):
         if not _has_cache(obj):
             continue
         cache = load(obj)
@@ -541,13 +541,27 @@ def on_render_init(scene, *_):
     check_scene(scene)
 
 
+def _enabled(scene) -> list:
+    from . import engine_bridge
+
+    return engine_bridge.enabled_objects(scene)
+
+
+@persistent
+def on_frame_changed(scene, *_):
+    """After the live handler (registered after it): status lines of stale caches say so."""
+    if (_stale or _mismatch) and not _baking:
+        note_stale(_enabled(scene))
+
+
 @persistent
 def on_edit(scene, depsgraph):
-    for update in depsgraph.updates:
-        if isinstance(update.id, _ANIMATION_TYPES) or (isinstance(update.id, bpy.types.Object)
-                                                        and update.is_updated_transform):
-            _inputs_checked.clear()
-            return
+    """After the live handler: an edit of animation data makes the next cached frame compare
+    the input digests again; status lines of stale caches say so."""
+    if any(isinstance(u.id, _ANIMATION_TYPES) or (isinstance(u.id, bpy.types.Object) and u.is_updated_transform)
+           for u in depsgraph.updates):
+        _inputs_checked.clear()
+    on_frame_changed(scene)
 
 
 @persistent
@@ -558,7 +572,9 @@ def on_reset(*_):
     _inputs_checked.clear()
 
 
+#: For handlers.py, after its own live handlers (the order of a handler list is the call order).
 HANDLERS = (
+    (bpy.app.handlers.frame_change_post, on_frame_changed),
     (bpy.app.handlers.animation_playback_pre, on_playback_start),
     (bpy.app.handlers.render_init, on_render_init),
     (bpy.app.handlers.depsgraph_update_post, on_edit),

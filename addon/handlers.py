@@ -58,9 +58,7 @@ def _live_and_idle(handler):
 @persistent
 @_live_and_idle
 def on_frame_change(scene, depsgraph):
-    objects = _live_objects(scene, depsgraph)
-    _report(engine_bridge.update_scene(scene, depsgraph, objects))
-    cache.note_stale(objects)
+    _report(engine_bridge.update_scene(scene, depsgraph, _live_objects(scene, depsgraph)))
 
 
 def _deformed_objects(scene, depsgraph):
@@ -80,7 +78,6 @@ def on_depsgraph_update(scene, depsgraph):
     objects = [o for o in _deformed_objects(scene, depsgraph) if not _cache_handled(o, scene, depsgraph)]
     if objects:
         _report(engine_bridge.update_scene(scene, depsgraph, objects))
-        cache.note_stale(objects)
     if _lighting_updated(depsgraph):
         engine_bridge.reshade_scene(scene)
 
