@@ -51,7 +51,8 @@ class BakeJob:
     location: "FILE" (npz per object in `directory`, default `//hemishadow_cache`) or "PACKED".
     store_transfer: keep the transfer vectors (float16) so lighting can change after the bake.
     progress: called on the main thread as progress(frames_done, frame_count).
-    cancel: a threading.Event; when set, the job stops after the frame in flight and saves nothing.
+    cancel: a threading.Event; when set, the job stops (the engine between chunks of vertices of
+        the frame in flight) and saves nothing.
     Raises ValueError for objects that cannot be baked (not meshes, in Edit Mode, empty range)
     and for a cache folder that cannot be written, before any frame is computed.
     """
@@ -144,7 +145,8 @@ class BakeJob:
         depsgraph = bpy.context.evaluated_depsgraph_get()
         inputs = [self._frame_input(obj, depsgraph) for obj in self.objects]
         self.result.blender_seconds += time.perf_counter() - t0
-        self._pending.append((frame, self._executor.submit(_compute_frame, inputs, self.store_transfer)))
+        self._pending.append((frame, self._executor.submit(_compute_frame, inputs, self.store_transfer,
+                                                           self.cancel)))
 
     def _collect(self, block: bool, timeout: float = 0.0):
         while self._pending:
@@ -158,6 +160,8 @@ class BakeJob:
                     return
                 except Exception:
                     pass   # raised again below
+            if self.cancel.is_set() and _was_cancelled(future):
+                return   # the engine stopped for the cancel: step() finishes the job
             self._pending.pop(0)
             outputs, seconds = future.result()
             self.result.engine_seconds += seconds
@@ -214,24 +218,32 @@ class FrameInput:
         self.solver, self.vertices, self.normals, self.view = solver, vertices, normals, view
         self.lighting, self.albedo = lighting, albedo
 
-    def compute(self):
-        """Worker thread: (transfer (V, K), radiance (V, 3), ao (V,))."""
+    def compute(self, cancel=None):
+        """Worker thread: (transfer (V, K), radiance (V, 3), ao (V,)). When the `cancel` event is
+        set, the engine stops between chunks of vertices with hemishadow.Cancelled."""
         import hemishadow
 
-        transfer = self.solver.solve(self.vertices, self.normals, view=self.view)
+        progress = None if cancel is None else (lambda fraction: not cancel.is_set())
+        transfer = self.solver.solve(self.vertices, self.normals, view=self.view, progress=progress)
         return (transfer, hemishadow.shade(transfer, self.lighting, self.albedo),
                 hemishadow.ambient_occlusion(transfer))
 
 
-def _compute_frame(inputs, store_transfer):
+def _compute_frame(inputs, store_transfer, cancel=None):
     """Worker thread: no bpy here, only numpy arrays and the engine."""
     t0 = time.perf_counter()
     outputs = []
     for item in inputs:
-        transfer, radiance, ao = item.compute()
+        transfer, radiance, ao = item.compute(cancel)
         outputs.append((radiance, ao, transfer.astype(np.float16) if store_transfer else None,
                         item.lighting, item.albedo))
     return outputs, time.perf_counter() - t0
+
+
+def _was_cancelled(future) -> bool:
+    import hemishadow
+
+    return future.done() and isinstance(future.exception(), hemishadow.Cancelled)
 
 
 # -- the live path's pieces (mesh_io, engine_bridge), used the same way -------------------------

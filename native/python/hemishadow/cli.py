@@ -67,8 +67,8 @@ def _output_paths(mesh_path: str, out: str | None) -> tuple[str, str]:
 
 class ProgressBar:
     """A progress callback for the engine (fraction done, 0..1) that draws on `stream`: a bar
-    redrawn in place on a terminal, else a line per `step` (10 %). Returns False, which
-    cancels the engine's work, once `interrupted` is set (by Ctrl-C, see `_interrupts`)."""
+    redrawn in place on a terminal, else a line each time another `step` (10 %) is reached. Returns False, which
+    cancels the engine's work, once `interrupted` is set (by Ctrl-C, see `cancel_on_ctrl_c`)."""
 
     def __init__(self, label: str, stream=None, width: int = 30, step: int = 10):
         self.label, self.stream, self.width, self.step = label, stream or sys.stderr, width, step
@@ -80,13 +80,16 @@ class ProgressBar:
         if self.interrupted.is_set():
             return False
         percent = int(min(max(float(fraction), 0.0), 1.0) * 100)
+        if percent < self._shown:   # a new pass (the next object): start over
+            self.close()
+            self._shown = -1
         if self.tty and percent != self._shown:
             filled = percent * self.width // 100
             self.stream.write(f"\r{self.label} [{'#' * filled}{'.' * (self.width - filled)}] {percent:3d} %")
             self.stream.flush()
             self._shown = percent
         elif not self.tty and percent // self.step > self._shown // self.step:
-            self.stream.write(f"{self.label}: {percent // self.step * self.step} %\n")
+            self.stream.write(f"{self.label}: {percent} %\n")
             self.stream.flush()
             self._shown = percent
         return True
@@ -96,10 +99,11 @@ class ProgressBar:
         if self.tty and self._shown >= 0:
             self.stream.write("\n")
             self.stream.flush()
+            self._shown = -1
 
 
 @contextlib.contextmanager
-def _interrupts(flag: threading.Event):
+def cancel_on_ctrl_c(flag: threading.Event):
     """While inside, Ctrl-C sets `flag` instead of raising KeyboardInterrupt anywhere: the
     engine's progress callback sees it and cancels between chunks, and a write in progress is
     finished (callers check the flag after). Outside the main thread nothing changes."""
@@ -138,7 +142,7 @@ def run_transfer(args) -> int:
     lighting = (np.asarray(lighting, dtype=np.float32) * np.float32(args.intensity))
 
     bar = ProgressBar("transfer")
-    with _interrupts(bar.interrupted):
+    with cancel_on_ctrl_c(bar.interrupted):
         start = time.perf_counter()
         bar(0.0)   # building the solver takes a while on large meshes, without progress of its own
         try:
