@@ -293,26 +293,32 @@ def _why_invalid(obj, scene, frame: int, cache: BakeCache | None, depsgraph=None
 # ---------------------------------------------------------------------------------------
 # Stale caches (staleness.py): the animation is no longer what was baked
 
-# token -> why: caches whose animation inputs changed, found in this session. Forgotten on
-# undo, redo and file loads, which may have brought the bake's inputs back (checked again then).
-_stale: dict[str, str] = {}
-# token -> why: the last frame checked had other evaluated positions than the bake's. Per frame,
-# not for the session: a cloth simulation jumped over frames shows a different drape on that
-# frame only, and the cache serves again when played in order.
-_mismatch: dict[str, str] = {}
-# tokens whose input digests matched since the last edit of animation data
-_inputs_checked: set[str] = set()
+# Keyed by (object name, cache token): a duplicated object carries the same token.
+# -> why: caches whose animation inputs changed, found in this session. Forgotten on undo,
+# redo and file loads, which may have brought the bake's inputs back (checked again then).
+_stale: dict[tuple, str] = {}
+# -> why: the last frame checked had other evaluated positions than the bake's. Per frame, not
+# for the session: a cloth simulation jumped over frames shows a different drape on that frame
+# only, and the cache serves again when played in order.
+_mismatch: dict[tuple, str] = {}
+# caches whose input digests matched since the last edit of animation data
+_inputs_checked: set[tuple] = set()
+
+
+def _key(obj, token) -> tuple:
+    return obj.name, token
 
 
 def _stale_reason(obj, scene, frame: int | None, cache: BakeCache, depsgraph, recheck: bool) -> str | None:
     """Why the cache does not match the animation, or None. The digests of the inputs are
     compared (memoised until animation data is edited; a mismatch marks the cache stale for the
     session); on the current frame, the fingerprint of the evaluated positions too."""
-    token = cache.meta.get("token")
+    token = _key(obj, cache.meta.get("token"))
     if token in _stale:
         return _stale[token]
     if recheck or token not in _inputs_checked:
-        reason = staleness.changed_inputs(cache.meta.get("inputs", {}), staleness.inputs(obj, scene))
+        current = staleness.inputs(obj, scene)
+        reason = staleness.changed_inputs(cache.meta.get("inputs", {}), current, obj.name)
         if reason is not None:
             _mark(obj, _stale, token, reason)
             return reason
@@ -349,7 +355,7 @@ def _positions_differ(obj, scene, cache: BakeCache, frame: int, depsgraph) -> st
             "or placement changed)")
 
 
-def _mark(obj, table: dict, token: str, reason: str) -> None:
+def _mark(obj, table: dict, token: tuple, reason: str) -> None:
     table[token] = reason
     print(f"hemishadow: {obj.name}: bake cache not used, it is stale: {reason}; computing live instead "
           "(bake again, or Clear Bake)")
@@ -369,7 +375,7 @@ def _set_status(obj, message: str) -> None:
 def stale_reason(obj) -> str | None:
     """Why the object's cache was last found stale, or None (cheap: for the UI)."""
     token = obj.get(TOKEN_KEY)
-    return (_stale.get(token) or _mismatch.get(token)) if token else None
+    return (_stale.get(_key(obj, token)) or _mismatch.get(_key(obj, token))) if token else None
 
 
 def note_stale(objects) -> None:
@@ -443,7 +449,7 @@ def apply_cached(obj, frame: int, scene=None) -> bool:
     Returns False (and writes nothing) when the cache does not cover the frame or is stale."""
     cache = load(obj)
     frame = int(frame)
-    if cache is None or not cache.covers(frame) or cache.meta.get("token") in _stale:
+    if cache is None or not cache.covers(frame) or _key(obj, cache.meta.get("token")) in _stale:
         return False   # a mismatch of positions is checked again: it may have been another frame
     if scene is not None and _stale_reason(obj, scene, frame, cache, None, False) is not None:
         return False

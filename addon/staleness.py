@@ -96,27 +96,31 @@ def fingerprint_mismatch(stored: np.ndarray, current: np.ndarray) -> float | Non
 # Input digests
 
 def inputs(obj, scene) -> dict[str, str]:
-    """{"<object>/<part>": digest} for the object and everything its geometry depends on."""
+    """{"<object>/<part>": digest} for the object and everything its geometry depends on. The
+    object itself is "" (renaming it keeps its cache), the others go by name."""
     found = {}
     for dependency in _dependencies(obj, scene):
+        name = "" if dependency == obj else dependency.name
         for part, values in _parts(dependency, scene).items():
             if values:
-                found[f"{dependency.name}/{part}"] = _digest(values)
+                found[f"{name}/{part}"] = _digest(values)
     return found
 
 
-def changed_inputs(stored: dict, current: dict) -> str | None:
-    """None when equal; else a sentence saying what changed, for the status line."""
+def changed_inputs(stored: dict, current: dict, name: str = "") -> str | None:
+    """None when equal; else a sentence saying what changed, for the status line (`name`: the
+    cached object's)."""
     if stored == current:
         return None
     for key in sorted(set(stored) | set(current)):
         if stored.get(key) != current.get(key):
-            name, part = key.rsplit("/", 1)
+            owner, part = key.rsplit("/", 1)
+            owner = owner or name
             if key not in stored:
-                return f"'{name}' has new {part} since the bake"
+                return f"'{owner}' has new {part} since the bake"
             if key not in current:
-                return f"the {part} of '{name}' were removed since the bake"
-            return f"the {part} of '{name}' changed since the bake"
+                return f"the {part} of '{owner}' were removed since the bake"
+            return f"the {part} of '{owner}' changed since the bake"
     return "the animation changed since the bake"
 
 

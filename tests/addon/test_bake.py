@@ -363,3 +363,12 @@ def test_cache_files_get_the_usual_permissions(addon, figure, tmp_path):
     mode = (tmp_path / "hemishadow_cache" / f"{obj.name}.npz").stat().st_mode & 0o777
     assert mode == 0o640
     assert [p.name for p in (tmp_path / "hemishadow_cache").iterdir()] == [f"{obj.name}.npz"]   # no temporary left
+
+
+def test_no_false_alarm_after_renaming_the_object(addon, figure):
+    scene, obj = figure
+    bake(addon, scene, obj, 1, 3)
+    obj.name = "Walker"
+    assert addon.cache.is_valid(obj, scene, 2) and served(addon, scene, obj, 2)
+    addon.cache.on_playback_start(scene)
+    assert addon.cache.stale_reason(obj) is None
