@@ -258,6 +258,16 @@ def test_edited_keyframes_make_the_cache_stale(addon, figure, capsys):
     assert np.abs(radiance - cached.radiance[3]).max() > 0.02   # the live values, not the stale ones
     assert "bake cache not used, it is stale" in capsys.readouterr().out
 
+    class Layout:   # what the object panels draw
+        lines = []
+
+        def label(self, text, icon="NONE"):
+            self.lines.append((text, icon))
+
+    addon.cache.draw_status(Layout(), obj)
+    assert Layout.lines[0] == ("Bake cache stale: not used, computed live", "ERROR")
+    assert "keyframes of 'Armature'" in Layout.lines[1][0]
+
 
 def test_a_disabled_modifier_makes_the_cache_stale(addon, figure):
     scene, obj = figure
