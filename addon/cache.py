@@ -317,8 +317,11 @@ def _stale_reason(obj, scene, frame: int | None, cache: BakeCache, depsgraph, re
     if token in _stale:
         return _stale[token]
     if recheck or token not in _inputs_checked:
-        current = staleness.inputs(obj, scene)
-        reason = staleness.changed_inputs(cache.meta.get("inputs", {}), current, obj.name)
+        try:
+            current = staleness.inputs(obj, scene)
+            reason = staleness.changed_inputs(cache.meta.get("inputs", {}), current, obj.name)
+        except Exception as error:   # data this code does not know: it cannot vouch for the cache
+            reason = f"its animation inputs could not be read ({type(error).__name__}: {error})"
         if reason is not None:
             _mark(obj, _stale, token, reason)
             return reason
