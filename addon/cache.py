@@ -10,8 +10,9 @@ It also remembers what the animation was (staleness.py): digests of the keyframe
 constraints, modifiers and simulation settings the object's geometry depends on, and per
 frame a fingerprint of the evaluated positions. A cache that no longer matches is stale: it
 is not served (the live path computes instead), and the object's status, the console and the
-panel say why. The digests are compared when playback or a render starts and when a cache is
-first used (again after any edit of animation data); the fingerprint on every served frame.
+panel say why. The digests are compared when playback starts and on the first cached frame
+of a render, of a session and after any edit of animation data; the fingerprint on every
+served frame.
 
 Where it lives (see docs/baking.md):
 - FILE (default): `//hemishadow_cache/<object name>.npz` beside the .blend file, written
@@ -406,7 +407,7 @@ def draw_status(layout, obj) -> None:
 
 def check_scene(scene) -> list[str]:
     """Compare the input digests of every enabled object's cache with the scene now (playback
-    and render start), before any frame is evaluated; returns the names of stale ones."""
+    start), before any frame is evaluated; returns the names of stale ones."""
     _inputs_checked.clear()
     found = []
     for obj in _enabled(scene):
@@ -547,7 +548,9 @@ def on_playback_start(scene, *_):
 
 @persistent
 def on_render_init(scene, *_):
-    check_scene(scene)
+    """A render may run this on its own thread: no data is written here; the first frame the
+    render takes from a cache compares the digests (handled(), in the frame handler)."""
+    _inputs_checked.clear()
 
 
 def _enabled(scene) -> list:

@@ -295,7 +295,7 @@ def test_positions_catch_what_the_digests_cannot_see(addon, figure):
     assert served(addon, scene, obj, 2) and addon.cache.stale_reason(obj) is None
 
 
-def test_playback_and_render_start_check_before_any_frame(addon, figure):
+def test_playback_start_and_first_cached_frames_compare_the_digests(addon, figure):
     scene, obj = figure
     bake(addon, scene, obj, 1, 5)
     assert (addon.cache.on_playback_start in bpy.app.handlers.animation_playback_pre
@@ -307,9 +307,13 @@ def test_playback_and_render_start_check_before_any_frame(addon, figure):
     addon.cache.on_playback_start(scene)
     assert "keyframes" in addon.cache.stale_reason(obj)
     addon.cache.on_reset()       # as undo does
+    assert served(addon, scene, obj, 2) is False   # the first cached frame compares the digests too
     key.co.y = value
-    addon.cache.on_render_init(scene)
-    assert addon.cache.stale_reason(obj) is None and addon.cache.is_valid(obj, scene)
+    addon.cache.on_reset()
+    assert served(addon, scene, obj, 2) and addon.cache.stale_reason(obj) is None
+    key.co.y = value + 0.3
+    addon.cache.on_render_init(scene)   # a render starts: its first cached frame checks again
+    assert served(addon, scene, obj, 3) is False and "keyframes" in addon.cache.stale_reason(obj)
 
 
 @pytest.fixture
