@@ -7,7 +7,7 @@ cancelled with Ctrl-C (nothing saved).
 
 Progress goes to stderr as in the engine's own command line (`hemishadow.cli.ProgressBar`): a
 bar redrawn in place on a terminal, a line per 10 % otherwise; `compute` shows the engine's
-progress through the vertices, `bake` the frames.
+progress through the vertices, `bake` the frames (and the vertices within them).
 """
 
 from __future__ import annotations
@@ -209,9 +209,9 @@ def _bake(scene, objects, args) -> bool:
     t0 = time.perf_counter()
     with interrupts:
         try:
-            result = bake_range(scene, objects, start, end, progress=lambda done, total: bar(done / total),
-                                cancel=bar.interrupted, location="PACKED" if args.pack else "FILE",
-                                directory=args.cache_dir, store_transfer=not args.no_transfer)
+            result = bake_range(scene, objects, start, end, fraction=bar, cancel=bar.interrupted,
+                                location="PACKED" if args.pack else "FILE", directory=args.cache_dir,
+                                store_transfer=not args.no_transfer)
         finally:
             bar.close()
     if result.cancelled:

@@ -80,6 +80,8 @@ class BakeJob:
         self._solvers = {}
         self._shading = {obj.name: _shading_of(obj, self.scene) for obj in self.objects}
         self._executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="hemishadow-bake")
+        self._inflight = 0.0    # fraction of the frame the worker is computing (it writes, we read)
+        self._fraction = 0.0
         self._baking = cache.baking()
         self._baking.__enter__()
         self.finished = False
@@ -87,6 +89,19 @@ class BakeJob:
     @property
     def frame_count(self) -> int:
         return self.frame_end - self.frame_start + 1
+
+    @property
+    def fraction_done(self) -> float:
+        """Main thread: the fraction of the range done, within frames too (the engine's progress
+        through the vertices of the frame it computes); never goes back."""
+        now = (self.result.frames_done + min(self._inflight, 1.0)) / self.frame_count
+        self._fraction = max(self._fraction, min(now, 1.0))
+        return self._fraction
+
+    def _engine_progress(self, fraction: float) -> bool:
+        """Worker thread, from the engine: note the frame's progress; False (stop) once cancelled."""
+        self._inflight = fraction
+        return not self.cancel.is_set()
 
     def _check(self):
         if self.frame_end < self.frame_start:
@@ -146,7 +161,7 @@ class BakeJob:
         inputs = [self._frame_input(obj, depsgraph) for obj in self.objects]
         self.result.blender_seconds += time.perf_counter() - t0
         self._pending.append((frame, self._executor.submit(_compute_frame, inputs, self.store_transfer,
-                                                           self.cancel)))
+                                                           self._engine_progress)))
 
     def _collect(self, block: bool, timeout: float = 0.0):
         while self._pending:
@@ -164,6 +179,7 @@ class BakeJob:
                 return   # the engine stopped for the cancel: step() finishes the job
             self._pending.pop(0)
             outputs, seconds = future.result()
+            self._inflight = 0.0
             self.result.engine_seconds += seconds
             for obj, output in zip(self.objects, outputs):
                 self._frames[obj.name][frame] = output
@@ -218,23 +234,24 @@ class FrameInput:
         self.solver, self.vertices, self.normals, self.view = solver, vertices, normals, view
         self.lighting, self.albedo = lighting, albedo
 
-    def compute(self, cancel=None):
-        """Worker thread: (transfer (V, K), radiance (V, 3), ao (V,)). When the `cancel` event is
-        set, the engine stops between chunks of vertices with hemishadow.Cancelled."""
+    def compute(self, progress=None):
+        """Worker thread: (transfer (V, K), radiance (V, 3), ao (V,)). `progress` is the engine's
+        (a False return stops it with hemishadow.Cancelled)."""
         import hemishadow
 
-        progress = None if cancel is None else (lambda fraction: not cancel.is_set())
         transfer = self.solver.solve(self.vertices, self.normals, view=self.view, progress=progress)
         return (transfer, hemishadow.shade(transfer, self.lighting, self.albedo),
                 hemishadow.ambient_occlusion(transfer))
 
 
-def _compute_frame(inputs, store_transfer, cancel=None):
-    """Worker thread: no bpy here, only numpy arrays and the engine."""
+def _compute_frame(inputs, store_transfer, progress=None):
+    """Worker thread: no bpy here, only numpy arrays and the engine. `progress(fraction of the
+    frame)` as the engine's."""
     t0 = time.perf_counter()
     outputs = []
-    for item in inputs:
-        transfer, radiance, ao = item.compute(cancel)
+    for i, item in enumerate(inputs):
+        share = None if progress is None else (lambda f, i=i: progress((i + f) / len(inputs)))
+        transfer, radiance, ao = item.compute(share)
         outputs.append((radiance, ao, transfer.astype(np.float16) if store_transfer else None,
                         item.lighting, item.albedo))
     return outputs, time.perf_counter() - t0
@@ -265,15 +282,21 @@ def _shading_of(obj, scene):
 
 
 def bake_range(context_or_scene, objects, frame_start, frame_end, *, progress=None, cancel=None, location="FILE",
-               directory=None, store_transfer=True) -> BakeResult:
+               directory=None, store_transfer=True, fraction=None) -> BakeResult:
     """Bake `objects` over frame_start..frame_end (inclusive) into their caches and return a
     `BakeResult`. Blocks until done; `cancel` (threading.Event) stops it early, saving nothing.
-    Arguments as `BakeJob`."""
+    `fraction`: called on this thread with `BakeJob.fraction_done` whenever it grew (for a
+    progress bar that moves within the frames of a heavy mesh). Other arguments as `BakeJob`."""
     job = BakeJob(context_or_scene, objects, frame_start, frame_end, progress=progress, cancel=cancel,
                   location=location, directory=directory, store_transfer=store_transfer)
+    shown = -1.0
     try:
-        while not job.step(budget_seconds=0.5):
-            pass
+        while not job.step(budget_seconds=0.1 if fraction else 0.5):
+            if fraction is not None and job.fraction_done > shown:
+                shown = job.fraction_done
+                fraction(shown)
+        if fraction is not None and job.fraction_done > shown:
+            fraction(job.fraction_done)   # the last frames, collected by the final step
     except BaseException:
         job.abort()
         raise
