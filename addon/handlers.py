@@ -21,19 +21,17 @@ console.
 import bpy
 from bpy.app.handlers import persistent
 
-from . import engine_bridge, evaluated, lighting, world_render
+from . import cache, engine_bridge, evaluated, lighting, world_render
 
 _busy = False
 #: scene name -> lighting.fingerprint the objects were last shaded with.
 _lighting_seen: dict[str, str] = {}
 
 
-def _cache_handled(obj, scene):
+def _cache_handled(obj, scene, depsgraph):
     """True when a bake cache supplied this frame (cache.py, by the bake helper)."""
-    from . import cache
-
     try:
-        return cache.handled(obj, scene)
+        return cache.handled(obj, scene, depsgraph)
     except (ValueError, RuntimeError, OSError) as error:
         print(f"hemishadow: {obj.name}: bake cache not used: {error}")
         return False
@@ -44,8 +42,8 @@ def _report(errors):
         print(f"hemishadow: {name}: {message}")
 
 
-def _live_objects(scene):
-    return [o for o in engine_bridge.enabled_objects(scene) if not _cache_handled(o, scene)]
+def _live_objects(scene, depsgraph=None):
+    return [o for o in engine_bridge.enabled_objects(scene) if not _cache_handled(o, scene, depsgraph)]
 
 
 def _live_and_idle(handler):
@@ -94,7 +92,7 @@ def _reshade_if_lighting_changed(scene, live=None, named=False):
 @persistent
 @_live_and_idle
 def on_frame_change(scene, depsgraph):
-    live = _live_objects(scene)
+    live = _live_objects(scene, depsgraph)
     _report(engine_bridge.update_scene(scene, depsgraph, live))
     _reshade_if_lighting_changed(scene, live)
 
@@ -113,7 +111,7 @@ def _lighting_updated(depsgraph):
 @persistent
 @_live_and_idle
 def on_depsgraph_update(scene, depsgraph):
-    objects = [o for o in _deformed_objects(scene, depsgraph) if not _cache_handled(o, scene)]
+    objects = [o for o in _deformed_objects(scene, depsgraph) if not _cache_handled(o, scene, depsgraph)]
     if objects:
         _report(engine_bridge.update_scene(scene, depsgraph, objects))
     _reshade_if_lighting_changed(scene, named=_lighting_updated(depsgraph))
@@ -145,7 +143,7 @@ _HANDLERS = (
     (bpy.app.handlers.render_init, on_render_init),
     (bpy.app.handlers.undo_post, on_undo_redo),
     (bpy.app.handlers.redo_post, on_undo_redo),
-)
+) + cache.HANDLERS   # stale-cache checks: playback and render start, edits, undo, loads
 
 
 def register():

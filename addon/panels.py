@@ -2,7 +2,7 @@
 
 import bpy
 
-from . import engine_bridge, mesh_io
+from . import cache, engine_bridge, mesh_io
 from . import objects as scope
 
 # Objects the panels show: meshes, and the kinds hemishadow refuses (to say so).
@@ -40,6 +40,7 @@ def draw_object_settings(layout, obj, scene):
         layout.operator("hemishadow.make_single_user", icon="USER")
     if settings.status:
         column.label(text=settings.status, icon="INFO")
+    cache.draw_status(column, obj)
     timing = engine_bridge.last_timings.get(obj.name)
     if timing:
         column.label(text=f"{timing[0]} vertices: engine {timing[2] * 1e3:.0f} ms, Blender I/O {timing[1] * 1e3:.0f} ms")
