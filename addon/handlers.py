@@ -9,12 +9,16 @@ Loops are impossible by construction, on two levels:
 
 No error leaves a handler: engine and input errors go to the object's status line and the
 console.
+
+Heavy objects go to a worker thread (jobs.py) when Blender itself changed the frame or the
+data in a window; renders, scripts and background mode compute synchronously. A render
+waits for the jobs first, and computes synchronously from render_init to its end.
 """
 
 import bpy
 from bpy.app.handlers import persistent
 
-from . import engine_bridge
+from . import engine_bridge, jobs
 
 _busy = False
 
@@ -60,7 +64,9 @@ def _live_and_idle(handler):
 @persistent
 @_live_and_idle
 def on_frame_change(scene, depsgraph):
-    _report(engine_bridge.update_scene(scene, depsgraph, _live_objects(scene)))
+    live = _live_objects(scene)
+    jobs.drop([o for o in engine_bridge.enabled_objects(scene) if o not in live], scene.frame_current)  # cached
+    _report(jobs.update_scene(scene, depsgraph, live, interactive=jobs.interactive(), keep_running=jobs.playing()))
 
 
 def _deformed_objects(scene, depsgraph):
@@ -79,13 +85,15 @@ def _lighting_updated(depsgraph):
 def on_depsgraph_update(scene, depsgraph):
     objects = [o for o in _deformed_objects(scene, depsgraph) if not _cache_handled(o, scene)]
     if objects:
-        _report(engine_bridge.update_scene(scene, depsgraph, objects))
+        _report(jobs.update_scene(scene, depsgraph, objects, interactive=jobs.interactive(),
+                                  keep_running=jobs.playing()))
     if _lighting_updated(depsgraph):
         engine_bridge.reshade_scene(scene)
 
 
 @persistent
 def on_load(_):
+    jobs.reset()
     engine_bridge.forget()
 
 
@@ -94,8 +102,27 @@ def on_undo_redo(scene, *_):
     engine_bridge.forget_positions()
 
 
+@persistent
+def on_render_init(scene, *_):
+    jobs.set_rendering(True)
+
+
+@persistent
+def on_render_pre(scene, *_):
+    jobs.finish_all(recompute_cancelled=scene.hemishadow.live)
+
+
+@persistent
+def on_render_end(scene, *_):
+    jobs.set_rendering(False)
+
+
 _HANDLERS = (
     (bpy.app.handlers.frame_change_post, on_frame_change),
+    (bpy.app.handlers.render_init, on_render_init),
+    (bpy.app.handlers.render_pre, on_render_pre),
+    (bpy.app.handlers.render_complete, on_render_end),
+    (bpy.app.handlers.render_cancel, on_render_end),
     (bpy.app.handlers.depsgraph_update_post, on_depsgraph_update),
     (bpy.app.handlers.load_post, on_load),
     (bpy.app.handlers.undo_post, on_undo_redo),
@@ -115,4 +142,5 @@ def unregister():
         for old in [h for h in handlers if getattr(h, "__name__", None) == function.__name__
                     and getattr(h, "__module__", None) == function.__module__]:
             handlers.remove(old)
+    jobs.reset()
     engine_bridge.forget()

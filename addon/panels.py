@@ -2,7 +2,7 @@
 
 import bpy
 
-from . import engine_bridge
+from . import engine_bridge, jobs
 
 
 class _Sidebar:
@@ -27,6 +27,8 @@ def draw_object_settings(layout, obj):
     outputs.prop(settings, "write_sh")
     if settings.status:
         column.label(text=settings.status, icon="INFO")
+    if jobs.pending([obj]):
+        column.operator("hemishadow.cancel_jobs", icon="CANCEL")
     timing = engine_bridge.last_timings.get(obj.name)
     if timing:
         column.label(text=f"{timing[0]} vertices: engine {timing[2] * 1e3:.0f} ms, Blender I/O {timing[1] * 1e3:.0f} ms")

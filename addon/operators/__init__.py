@@ -1,10 +1,10 @@
-"""Operators, one module per job: live.py (compute, live toggle, clear, material) and
-bake.py (bake a frame range to a cache)."""
+"""Operators, one module per job: live.py (compute, live toggle, clear, material),
+bake.py (bake a frame range to a cache) and jobs.py (heavy meshes in the background)."""
 
 import bpy
 
-from . import bake, live
+from . import bake, jobs, live
 
-classes = live.classes + bake.classes
+classes = live.classes + bake.classes + jobs.classes
 
 register, unregister = bpy.utils.register_classes_factory(classes)
