@@ -155,13 +155,19 @@ def compute_object(obj, depsgraph, scene, *, force=False, lighting=None):
     return _shade_request(obj, scene, request, solve_object(request), lighting)
 
 
+def obsolete(request):
+    """True when a Request's result must not be written: the object's solver changed, or the
+    result of a request read later has been written (or found current) already."""
+    entry = request.entry
+    return _entries.get(request.uid) is not entry or entry.written > request.serial
+
+
 def finish_object(obj, scene, request, transfer, lighting=None):
     """Main thread: shade and write a transfer that solve_object computed elsewhere; returns
     the Result, or None when it is obsolete: the object's solver changed meanwhile, or a
     request read later has been written already. Errors are raised as by update_object, the
     status line is set either way."""
-    entry = request.entry
-    if _entries.get(obj.session_uid) is not entry or entry.written > request.serial:
+    if obsolete(request):
         return None
     try:
         mesh_io.check_computable(obj)

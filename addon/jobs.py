@@ -150,7 +150,7 @@ def request(obj, depsgraph, scene, *, force=False, keep_running=False):
         _current(obj, scene.frame_current)
         return None
     _status.setdefault(uid, obj.hemishadow.status)
-    engine_bridge.set_status(obj, _stale_text(uid))
+    engine_bridge.set_status(obj, _stale_text(obj))
     _start_timer()
     return job
 
@@ -182,9 +182,13 @@ def _jobs_locked(uids=None):
 def _drop_locked(uids, keep=None):
     for job in _jobs_locked(uids):
         if job is not keep:
-            job.cancel.set()
-            if _waiting.get(job.uid) is job:
-                del _waiting[job.uid]
+            _cancel_locked(job)
+
+
+def _cancel_locked(job):
+    job.cancel.set()
+    if _waiting.get(job.uid) is job:
+        del _waiting[job.uid]
 
 
 def drop(objects, frame):
@@ -288,11 +292,14 @@ def _show_progress():
     longer than PROGRESS_AFTER. Returns True while jobs are pending."""
     global _progress_on
     with _cond:
+        for job in _jobs_locked():
+            if engine_bridge.obsolete(job.request):  # a newer result was written another way
+                _cancel_locked(job)
         jobs, running = _jobs_locked(), _running
     for uid in {j.uid for j in jobs}:
         obj = _object(uid)
         if obj is not None:
-            engine_bridge.set_status(obj, _stale_text(uid))
+            engine_bridge.set_status(obj, _stale_text(obj))
     wm = bpy.context.window_manager
     slow = running is not None and running.started is not None and not running.cancel.is_set() \
         and time.perf_counter() - running.started > PROGRESS_AFTER
@@ -323,11 +330,15 @@ def _percent(job):
     return int(job.fraction * 20) * 5  # in steps of 5 %: fewer status updates
 
 
-def _showing(uid):
+def _showing(obj):
+    if mesh_io.RADIANCE not in obj.data.attributes:
+        return "no result yet"
+    uid = obj.session_uid
     return f"showing frame {_shown[uid]}" if uid in _shown else "showing the previous result"
 
 
-def _stale_text(uid):
+def _stale_text(obj):
+    uid = obj.session_uid
     with _cond:
         running = _running if _running is not None and _running.uid == uid and not _running.cancel.is_set() else None
         waiting = _waiting.get(uid)
@@ -336,7 +347,8 @@ def _stale_text(uid):
         parts.append(f"computing frame {running.frame}, {_percent(running)} %")
     if waiting is not None:
         parts.append(f"frame {waiting.frame} next" if running else f"frame {waiting.frame} waiting")
-    return f"stale ({_showing(uid)}): " + ", ".join(parts)
+    shown = _showing(obj)
+    return (shown if shown == "no result yet" else f"stale ({shown})") + ": " + ", ".join(parts)
 
 
 def _start_timer():
@@ -369,8 +381,7 @@ def cancel(objects=None):
         _cancelled[uid] = job
         obj = _object(uid)
         if obj is not None:
-            shown = _showing(uid) if mesh_io.RADIANCE in obj.data.attributes else "no result yet"
-            engine_bridge.set_status(obj, f"cancelled: frame {job.frame} not computed; {shown} (stale)")
+            engine_bridge.set_status(obj, f"cancelled: frame {job.frame} not computed; {_showing(obj)} (stale)")
     if not pending():
         _end_progress()
     return len(stopped)
