@@ -281,6 +281,8 @@ def _write(job):
         print(f"hemishadow: {obj.name}: {message}")
     elif result is not None:
         _current(obj, job.frame)
+    elif not pending([obj]):
+        _status.pop(job.uid, None)  # obsolete: whatever wrote the newer result set the status
 
 
 def _object(uid):
@@ -292,10 +294,12 @@ def _show_progress():
     longer than PROGRESS_AFTER. Returns True while jobs are pending."""
     global _progress_on
     with _cond:
-        for job in _jobs_locked():
-            if engine_bridge.obsolete(job.request):  # a newer result was written another way
-                _cancel_locked(job)
+        obsolete = [j for j in _jobs_locked() if engine_bridge.obsolete(j.request)]
+        for job in obsolete:  # a newer result was written another way, which set the status
+            _cancel_locked(job)
         jobs, running = _jobs_locked(), _running
+    for uid in {j.uid for j in obsolete} - {j.uid for j in jobs}:
+        _status.pop(uid, None)
     for uid in {j.uid for j in jobs}:
         obj = _object(uid)
         if obj is not None:
