@@ -214,19 +214,27 @@ def _current(obj, frame):
 
 def _work():
     global _running, _worker
-    while True:
+    try:
+        while True:
+            with _cond:
+                if not _waiting:
+                    _worker = None  # in the same lock as the check: a new job then starts a new worker
+                    _cond.notify_all()
+                    return
+                job = _waiting.pop(next(iter(_waiting)))
+                _running = job
+            try:
+                _solve(job)
+            finally:  # whatever happens, nobody waits for this job forever
+                with _cond:
+                    _running = None
+                    _finished.append(job)
+                    _cond.notify_all()
+    except BaseException:
         with _cond:
-            if not _waiting:
-                _worker = None
-                _cond.notify_all()
-                return
-            job = _waiting.pop(next(iter(_waiting)))
-            _running = job
-        _solve(job)
-        with _cond:
-            _running = None
-            _finished.append(job)
+            _worker = None
             _cond.notify_all()
+        raise
 
 
 def _solve(job):
