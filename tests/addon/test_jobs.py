@@ -186,6 +186,28 @@ def test_heavy_frame_computes_in_worker_showing_stale_result(scene):
     assert jobs.poll() is None and jobs._worker is None
 
 
+def test_live_handlers_send_heavy_objects_to_worker_in_a_window(scene, monkeypatch):
+    """Frame changes and edits made by Blender in a window (here: pretended) queue the heavy
+    object; on main they computed it before returning."""
+    obj = suzanne(2)
+    before = first_result(scene, obj)
+    scene.hemishadow.live = True
+    monkeypatch.setattr(jobs, "interactive", lambda: True)
+    scene.frame_set(2)
+    assert jobs.pending([obj]) and obj.hemishadow.status.startswith("stale (showing frame 1): ")
+    np.testing.assert_array_equal(radiance(obj), before)
+    run_jobs()
+    frame2 = radiance(obj)
+    np.testing.assert_allclose(frame2, sync_radiance(scene, obj), atol=1e-5)
+    obj.modifiers["wave"].height = 0.35  # an edit: depsgraph_update_post
+    bpy.context.view_layer.update()
+    assert jobs.pending([obj]) and obj.hemishadow.status.startswith("stale (showing frame 2): ")
+    np.testing.assert_array_equal(radiance(obj), frame2)
+    run_jobs()
+    assert np.abs(radiance(obj) - frame2).max() > 0.01
+    np.testing.assert_allclose(radiance(obj), sync_radiance(scene, obj), atol=1e-5)
+
+
 def test_heavy_by_vertex_count_then_by_solve_time(scene):
     light = suzanne(1)
     assert not jobs.heavy(light) and len(light.data.vertices) < jobs.HEAVY_VERTICES
