@@ -69,6 +69,13 @@ def gate(monkeypatch):
     gate.open()  # never leave a worker waiting
 
 
+@pytest.fixture
+def lower_threshold(monkeypatch):
+    """Heavy from 0.01 s per solve: the 7,958-vertex Suzanne stays heavy however fast the
+    engine gets (the default threshold is for people, not for tests)."""
+    monkeypatch.setattr(jobs, "HEAVY_SECONDS", 0.01)
+
+
 def suzanne(levels):
     """Suzanne subdivided `levels` times (2: 7,958 vertices, 3: 31,658) with a Wave modifier."""
     bpy.ops.mesh.primitive_monkey_add()
@@ -186,7 +193,7 @@ def test_heavy_frame_computes_in_worker_showing_stale_result(scene):
     assert jobs.poll() is None and jobs._worker is None
 
 
-def test_live_handlers_send_heavy_objects_to_worker_in_a_window(scene, monkeypatch):
+def test_live_handlers_send_heavy_objects_to_worker_in_a_window(scene, lower_threshold, monkeypatch):
     """Frame changes and edits made by Blender in a window (here: pretended) queue the heavy
     object; on main they computed it before returning."""
     obj = suzanne(2)
@@ -227,7 +234,7 @@ def test_light_objects_stay_synchronous(scene):
 
 # -- latest wins ----------------------------------------------------------------------------------
 
-def test_newer_frame_cancels_running_job(scene, gate, monkeypatch):
+def test_newer_frame_cancels_running_job(scene, lower_threshold, gate, monkeypatch):
     obj = suzanne(2)
     first_result(scene, obj)
     written = writes(monkeypatch)
@@ -243,7 +250,7 @@ def test_newer_frame_cancels_running_job(scene, gate, monkeypatch):
     np.testing.assert_allclose(radiance(obj), sync_radiance(scene, obj), atol=1e-5)
 
 
-def test_playback_lets_running_job_finish_then_latest(scene, gate, monkeypatch):
+def test_playback_lets_running_job_finish_then_latest(scene, lower_threshold, gate, monkeypatch):
     """During playback the running job finishes (results at the engine's pace), the waiting
     one is replaced by the newest frame, and results are written in order."""
     obj = suzanne(2)
@@ -261,7 +268,7 @@ def test_playback_lets_running_job_finish_then_latest(scene, gate, monkeypatch):
     np.testing.assert_allclose(radiance(obj), sync_radiance(scene, obj), atol=1e-5)
 
 
-def test_older_result_never_written_over_newer(scene, gate, monkeypatch):
+def test_older_result_never_written_over_newer(scene, lower_threshold, gate, monkeypatch):
     """A job of frame 2 still running when frame 3 is computed synchronously by a path that
     does not know about jobs (the command line, Compute Now from a script): its result,
     older, is dropped."""
@@ -281,7 +288,7 @@ def test_older_result_never_written_over_newer(scene, gate, monkeypatch):
     assert obj.hemishadow.status.startswith("7958 vertices")
 
 
-def test_back_to_shown_frame_drops_job(scene, gate):
+def test_back_to_shown_frame_drops_job(scene, lower_threshold, gate):
     obj = suzanne(2)
     before = first_result(scene, obj)
     status = obj.hemishadow.status
@@ -296,7 +303,7 @@ def test_back_to_shown_frame_drops_job(scene, gate):
 
 # -- cancel --------------------------------------------------------------------------------------
 
-def test_cancel_keeps_previous_result_with_clear_status(scene, gate):
+def test_cancel_keeps_previous_result_with_clear_status(scene, lower_threshold, gate):
     obj = suzanne(2)
     before = first_result(scene, obj)
     job = request(scene, obj, 2)
@@ -318,7 +325,7 @@ def live_on_quietly(scene):
     assert scene.hemishadow.live
 
 
-def test_live_off_cancels(scene, gate):
+def test_live_off_cancels(scene, lower_threshold, gate):
     obj = suzanne(2)
     first_result(scene, obj)
     request(scene, obj, 2)
@@ -327,7 +334,7 @@ def test_live_off_cancels(scene, gate):
     assert not jobs.pending() and obj.hemishadow.status.startswith("cancelled: frame 2 not computed")
 
 
-def test_cancel_operator(scene, gate):
+def test_cancel_operator(scene, lower_threshold, gate):
     obj = suzanne(2)
     first_result(scene, obj)
     assert not bpy.ops.hemishadow.cancel_jobs.poll()
@@ -338,7 +345,7 @@ def test_cancel_operator(scene, gate):
 
 # -- the synchronous paths ----------------------------------------------------------------------
 
-def test_scripted_frame_set_is_synchronous_and_wins(scene, gate):
+def test_scripted_frame_set_is_synchronous_and_wins(scene, lower_threshold, gate):
     obj = suzanne(2)
     first_result(scene, obj)
     old = request(scene, obj, 2)
@@ -363,7 +370,7 @@ def test_only_blender_itself_is_interactive(scene):
     assert seen == [True]
 
 
-def test_rendering_is_synchronous(scene):
+def test_rendering_is_synchronous(scene, lower_threshold):
     obj = suzanne(2)
     first_result(scene, obj)
     jobs.set_rendering(True)
@@ -374,7 +381,7 @@ def test_rendering_is_synchronous(scene):
         jobs.set_rendering(False)
 
 
-def test_render_waits_for_jobs(scene, gate):
+def test_render_waits_for_jobs(scene, lower_threshold, gate):
     """A still render of a frame whose heavy object is still computing: render_init and
     render_pre wait for the job and write it, so the render is not stale."""
     obj = suzanne(2)
@@ -404,7 +411,7 @@ def test_render_waits_for_jobs(scene, gate):
     np.testing.assert_allclose(rendered, sync_radiance(scene, obj), atol=1e-5)
 
 
-def test_recomputes_cancelled_before_render(scene, gate):
+def test_recomputes_cancelled_before_render(scene, lower_threshold, gate):
     obj = suzanne(2)
     first_result(scene, obj)
     request(scene, obj, 2)
@@ -418,7 +425,7 @@ def test_recomputes_cancelled_before_render(scene, gate):
     np.testing.assert_allclose(radiance(obj), sync_radiance(scene, obj), atol=1e-5)
 
 
-def test_compute_operator_without_window_is_synchronous(scene):
+def test_compute_operator_without_window_is_synchronous(scene, lower_threshold):
     obj = suzanne(2)
     engine_bridge.solve_seconds[obj.session_uid] = 1.0  # heavy
     bpy.context.view_layer.objects.active = obj
@@ -428,7 +435,7 @@ def test_compute_operator_without_window_is_synchronous(scene):
 
 # -- threads -------------------------------------------------------------------------------------
 
-def test_worker_never_touches_blender_data(scene, monkeypatch):
+def test_worker_never_touches_blender_data(scene, lower_threshold, monkeypatch):
     obj = suzanne(2)
     first_result(scene, obj)
     threads = {}
