@@ -10,6 +10,7 @@ Prints, for one frame change:
   to stop the engine.
 """
 
+import functools
 import pathlib
 import sys
 import time
@@ -20,6 +21,8 @@ ROOT = pathlib.Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 import addon  # noqa: E402  (the add-on from source, registered below)
 from addon import engine_bridge, jobs  # noqa: E402
+
+print = functools.partial(print, flush=True)  # noqa: A001  (progress of a long run)
 
 
 def heavy_suzanne(levels):
@@ -51,7 +54,7 @@ def main(levels):
     scene.hemishadow.lighting_source = "UNIFORM"
     obj = heavy_suzanne(levels)
     print(f"Suzanne, {levels} subdivisions: {len(obj.data.vertices)} vertices")
-    engine_bridge.update_scene(scene, bpy.context.evaluated_depsgraph_get(), [obj])  # builds the solver
+    jobs.update_scene(scene, bpy.context.evaluated_depsgraph_get(), [obj])  # builds the solver; frame 1 shown
 
     scene.frame_set(2)
     t0 = time.perf_counter()
