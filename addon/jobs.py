@@ -158,7 +158,6 @@ def request(obj, depsgraph, scene, *, force=False, keep_running=False):
 def _queue_locked(job, keep_running):
     """Latest wins: a job computing the same positions is kept, any other of the object dropped
     (a running one only when not `keep_running`)."""
-    global _worker
     same = [j for j in _jobs_locked({job.uid}) if j.request.fingerprint == job.request.fingerprint]
     if same:
         _drop_locked({job.uid}, keep=same[0])
@@ -166,11 +165,15 @@ def _queue_locked(job, keep_running):
     _drop_locked({job.uid}, keep=_running if keep_running else None)
     _waiting[job.uid] = job
     _cancelled.pop(job.uid, None)
-    if _worker is None:
+    _start_worker_locked()
+    return job
+
+
+def _start_worker_locked():
+    global _worker
+    if _worker is None:  # one at a time: a solver must not be used by two threads
         _worker = threading.Thread(target=_work, name="hemishadow-jobs", daemon=True)
         _worker.start()
-    _cond.notify_all()
-    return job
 
 
 def _jobs_locked(uids=None):
@@ -402,15 +405,13 @@ def cancel(objects=None):
 def finish_all(recompute_cancelled=False):
     """Wait for every job and write its result (before a render: a rendered frame is never
     stale); with `recompute_cancelled`, the jobs the user cancelled run again first."""
-    global _worker
     with _cond:
         if recompute_cancelled:
             for uid, old in _cancelled.items():
                 if uid not in _waiting:
                     _waiting[uid] = Job(old.name, old.scene, old.frame, old.request)
-            if _waiting and _worker is None:
-                _worker = threading.Thread(target=_work, name="hemishadow-jobs", daemon=True)
-                _worker.start()
+            if _waiting:
+                _start_worker_locked()
         _cancelled.clear()
         _cond.wait_for(lambda: _worker is None and _running is None)
     _write_finished()  # the window manager's progress ends at the next poll, on the main thread
