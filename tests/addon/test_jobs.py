@@ -172,18 +172,20 @@ def test_heavy_frame_computes_in_worker_showing_stale_result(scene):
     t0 = time.perf_counter()
     request(scene, obj, 4)
     assert time.perf_counter() - t0 < synchronous / 10  # blocked by reading the mesh only, not by the engine
-    statuses, longest, deadline = set(), 0.0, time.perf_counter() + 120
+    statuses, longest, deadline, progress = set(), 0.0, time.perf_counter() + 120, set()
     while True:
         np.testing.assert_array_equal(radiance(obj), before)  # the previous result, untouched
         statuses.add(obj.hemishadow.status)
         t0 = time.perf_counter()
         again = jobs.poll()
         longest = max(longest, time.perf_counter() - t0)
+        progress.add(jobs._progress_on)  # the window manager's progress, after PROGRESS_AFTER
         if again is None:
             break
         assert time.perf_counter() < deadline
         time.sleep(0.02)
     assert longest < synchronous / 10, f"a poll blocked the main thread for {longest:.3f} s"
+    assert progress == {False, True} and not jobs._progress_on  # shown while it ran for seconds, then ended
     computing = [s for s in statuses if s.startswith("stale (showing frame 1): computing frame 4, ")]
     assert computing and all(s.endswith(" %") for s in computing), statuses
     assert not obj.hemishadow.status.startswith("stale") and obj.hemishadow.status.startswith("31658 vertices")
