@@ -66,7 +66,7 @@ def _live_and_idle(handler):
 def on_frame_change(scene, depsgraph):
     live = _live_objects(scene)
     jobs.drop([o for o in engine_bridge.enabled_objects(scene) if o not in live], scene.frame_current)  # cached
-    _report(jobs.update_scene(scene, depsgraph, live, interactive=jobs.interactive(), keep_running=jobs.playing()))
+    _report(jobs.update_scene(scene, depsgraph, live, interactive=jobs.interactive()))
 
 
 def _deformed_objects(scene, depsgraph):
@@ -85,8 +85,7 @@ def _lighting_updated(depsgraph):
 def on_depsgraph_update(scene, depsgraph):
     objects = [o for o in _deformed_objects(scene, depsgraph) if not _cache_handled(o, scene)]
     if objects:
-        _report(jobs.update_scene(scene, depsgraph, objects, interactive=jobs.interactive(),
-                                  keep_running=jobs.playing()))
+        _report(jobs.update_scene(scene, depsgraph, objects, interactive=jobs.interactive()))
     if _lighting_updated(depsgraph):
         engine_bridge.reshade_scene(scene)
 

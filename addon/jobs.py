@@ -114,13 +114,16 @@ def playing():
 
 # -- requesting (main thread) ----------------------------------------------------------------------
 
-def update_scene(scene, depsgraph, objects=None, *, interactive=False, force=False, keep_running=False):
+def update_scene(scene, depsgraph, objects=None, *, interactive=False, force=False, keep_running=None):
     """engine_bridge.update_scene, except that with `interactive` heavy objects are queued for
-    the worker instead of computed now. Objects computed now drop their jobs first (their
-    result is newer). Returns {name: error message} as engine_bridge.update_scene."""
+    the worker instead of computed now (`keep_running` as `request`; None: while playing).
+    Objects computed now drop their jobs first (their result is newer). Returns
+    {name: error message} as engine_bridge.update_scene."""
     objects = engine_bridge.enabled_objects(scene) if objects is None else list(objects)
     queued = [o for o in objects if interactive and not _rendering and heavy(o)]
     now = [o for o in objects if o not in queued]
+    if queued and keep_running is None:
+        keep_running = playing()
     errors = {}
     for obj in queued:
         try:
@@ -135,7 +138,8 @@ def update_scene(scene, depsgraph, objects=None, *, interactive=False, force=Fal
 
 def request(obj, depsgraph, scene, *, force=False, keep_running=False):
     """Queue the object's evaluated mesh for the worker and mark its result stale; returns the
-    Job, or None when the result on display is current (its jobs, older, are dropped)."""
+    Job, or None when the result on display is current (its jobs, older, are dropped).
+    `keep_running`: let the object's running job finish (playback) rather than stop it."""
     uid = obj.session_uid
     new = engine_bridge.read_object(obj, depsgraph, scene, force=force)
     with _cond:
