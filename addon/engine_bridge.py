@@ -41,6 +41,8 @@ class Result:
 
 # Keyed by ID.session_uid: stable while the object lives, unlike its name.
 _entries: dict[int, _Entry] = {}
+#: World-space positions the last transfer was computed on (lamps light each vertex from there).
+_positions: dict[int, np.ndarray] = {}
 #: object name -> (vertex count, Blender I/O seconds, engine seconds) of its last computation.
 last_timings: dict[str, tuple[int, float, float]] = {}
 
@@ -138,7 +140,7 @@ def _shade_request(obj, scene, request, transfer, lighting):
     t0 = time.perf_counter()
     entry = request.entry
     entry.transfer, entry.fingerprint, entry.written = transfer, request.fingerprint, request.serial
-    result = _shade(obj, scene, transfer, lighting)
+    result = _shade(obj, scene, transfer, lighting, request.vertices)
     result.io_seconds = request.io_seconds
     result.engine_seconds = request.solve_seconds + time.perf_counter() - t0
     return result
@@ -179,12 +181,18 @@ def finish_object(obj, scene, request, transfer, lighting=None):
     return result
 
 
-def _shade(obj, scene, transfer, lighting=None):
+def _shade(obj, scene, transfer, lighting=None, vertices=None):
+    """Environment and suns (`lighting`, default the scene's) plus the lamps at `vertices`
+    (default: the positions of the object's last computation)."""
     import hemishadow
+
+    from . import lighting as scene_lights
 
     if lighting is None:
         lighting = scene_lighting(scene, obj.hemishadow.band_count)
-    radiance = hemishadow.shade(transfer, lighting, _albedo(obj))
+    if vertices is not None:
+        _positions[obj.session_uid] = vertices
+    radiance = scene_lights.shade(scene, transfer, lighting, _albedo(obj), _positions.get(obj.session_uid))
     return Result(transfer, hemishadow.ambient_occlusion(transfer), radiance)
 
 
@@ -259,12 +267,17 @@ def reshade_object(obj, scene, lighting=None):
     return True
 
 
-def reshade_scene(scene):
-    """Re-shade every object of the scene that has transfer vectors; errors go to the status."""
-    for obj in scene.objects:
+def reshade_scene(scene, objects=None):
+    """Re-shade every object of the scene (or of `objects`) that has transfer vectors; errors
+    go to the status."""
+    lighting = {}
+    for obj in scene.objects if objects is None else objects:
         if obj.session_uid in _entries:
             try:
-                reshade_object(obj, scene)
+                bands = obj.hemishadow.band_count
+                if bands not in lighting:
+                    lighting[bands] = scene_lighting(scene, bands)
+                reshade_object(obj, scene, lighting[bands])
             except (ValueError, RuntimeError) as error:
                 set_status(obj, str(error))
 
@@ -273,8 +286,10 @@ def forget(obj=None):
     """Drop the solver and transfer of one object (all when None)."""
     if obj is None:
         _entries.clear()
+        _positions.clear()
     else:
         _entries.pop(obj.session_uid, None)
+        _positions.pop(obj.session_uid, None)
 
 
 def forget_positions():
@@ -291,6 +306,7 @@ def prune():
     alive = {o.session_uid for o in bpy.data.objects}
     for uid in [u for u in _entries if u not in alive]:
         del _entries[uid]
+        _positions.pop(uid, None)
 
 
 def has_transfer(obj):

@@ -52,7 +52,7 @@ class ComputeInBackground:
                                          interactive=True, force=True)
         self._objects = objects
         if not jobs.pending(objects):
-            return self._done()
+            return self._done(context)
         self._area = context.area
         wm = context.window_manager
         self._timer = wm.event_timer_add(jobs.INTERVAL, window=context.window)
@@ -77,7 +77,7 @@ class ComputeInBackground:
         for obj in self._objects:
             if jobs.error(obj):
                 self._errors.setdefault(obj.name, jobs.error(obj))
-        return self._done()
+        return self._done(context)
 
     def cancel(self, context):
         # Blender cancels a running modal operator when it loads another file or quits.
@@ -92,13 +92,17 @@ class ComputeInBackground:
             self._area.header_text_set(None)
             self._area = None
 
-    def _done(self):
+    def _done(self, context):
+        from .. import lighting
+
         errors = self._errors or {}
         if errors and len(errors) == len(self._objects):
             self.report({"ERROR"}, "; ".join(errors.values()))
             return {"CANCELLED"}
         if errors:
             self.report({"WARNING"}, "; ".join(errors.values()))
+        for message in lighting.report(context.scene):  # as execute: fallbacks, lamps not represented
+            self.report({"WARNING"}, message)
         return {"FINISHED"}
 
 

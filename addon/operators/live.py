@@ -40,6 +40,10 @@ class HEMISHADOW_OT_compute(ComputeInBackground, bpy.types.Operator):
             return {"CANCELLED"}
         if errors:
             self.report({"WARNING"}, "; ".join(errors.values()))
+        from .. import lighting
+
+        for message in lighting.report(context.scene):  # fallbacks, lamps not represented
+            self.report({"WARNING"}, message)
         return {"FINISHED"}
 
 

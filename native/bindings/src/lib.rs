@@ -8,11 +8,58 @@ use std::panic::{catch_unwind, AssertUnwindSafe};
 use hemishadow_engine as engine;
 use numpy::ndarray::Array2;
 use numpy::{IntoPyArray, PyArray2, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3};
-use pyo3::exceptions::{PyRuntimeError, PyValueError};
+use pyo3::create_exception;
+use pyo3::exceptions::{PyException, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
+use pyo3::types::PyBool;
+
+create_exception!(_native, Cancelled, PyException, "The computation was stopped by its progress callback.");
 
 fn to_py_err(error: engine::Error) -> PyErr {
-    PyValueError::new_err(error.to_string())
+    match error {
+        engine::Error::Cancelled => Cancelled::new_err("cancelled"),
+        engine::Error::InvalidInput(_) => PyValueError::new_err(error.to_string()),
+    }
+}
+
+/// The engine's progress callback over an optional Python callable. Between chunks of work it
+/// takes the GIL, lets Python handle pending signals (Ctrl-C) and calls the callable with the
+/// fraction done; `False` from the callable, or any exception, stops the work. The exception
+/// is kept and raised in place of `Cancelled`.
+struct PyProgress {
+    callback: Option<Py<PyAny>>,
+    error: Option<PyErr>,
+}
+
+impl PyProgress {
+    fn new(callback: Option<Py<PyAny>>) -> Self {
+        PyProgress { callback, error: None }
+    }
+
+    fn report(&mut self, fraction: f32) -> bool {
+        Python::attach(|py| {
+            let outcome = py.check_signals().and_then(|_| match &self.callback {
+                Some(callback) => callback.call1(py, (fraction,)).map(|v| !is_false(v.bind(py))),
+                None => Ok(true),
+            });
+            outcome.unwrap_or_else(|error| {
+                self.error = Some(error);
+                false
+            })
+        })
+    }
+
+    /// The callback's exception, if it raised one, else `result`'s error as usual.
+    fn finish<T>(self, result: PyResult<T>) -> PyResult<T> {
+        match self.error {
+            Some(error) => Err(error),
+            None => result,
+        }
+    }
+}
+
+fn is_false(value: &Bound<'_, PyAny>) -> bool {
+    value.is_instance_of::<PyBool>() && !value.is_truthy().unwrap_or(true)
 }
 
 /// Runs engine work without the GIL and with panics caught.
@@ -75,7 +122,7 @@ fn sh_basis<'py>(py: Python<'py>, directions: PyReadonlyArray2<f32>, bands: usiz
 
 /// Per-vertex transfer vectors; returns (transfer (N, bands^2), vertices without a normal).
 #[pyfunction]
-#[pyo3(signature = (vertices, triangles, normals, bands, exponent, view, views, offset, table_resolution, downsample))]
+#[pyo3(signature = (vertices, triangles, normals, bands, exponent, view, views, offset, table_resolution, downsample, receivers=None, progress=None))]
 #[allow(clippy::too_many_arguments)]
 fn transfer<'py>(
     py: Python<'py>,
@@ -89,6 +136,8 @@ fn transfer<'py>(
     offset: Option<f32>,
     table_resolution: usize,
     downsample: Option<usize>,
+    receivers: Option<PyReadonlyArray1<u32>>,
+    progress: Option<Py<PyAny>>,
 ) -> PyResult<(Bound<'py, PyArray2<f32>>, usize)> {
     let vertices = rows3(&vertices, "vertices")?;
     let triangles = triangles3(&triangles)?;
@@ -96,8 +145,16 @@ fn transfer<'py>(
     let view = view_argument(view, views)?;
     let brdf = exponent.map_or(engine::Brdf::Diffuse, |exponent| engine::Brdf::Phong { exponent });
     let settings = engine::Settings { bands, brdf, view, offset, table_resolution, downsample };
-    let n = vertices.len();
-    let output = run(py, || engine::transfer(&vertices, &triangles, normals.as_deref(), &settings))?;
+    let receivers = receivers.map(|r| r.as_slice().map(<[u32]>::to_vec)).transpose()?;
+    let n = receivers.as_ref().map_or(vertices.len(), Vec::len);
+    let mut reporter = PyProgress::new(progress);
+    let report = &mut reporter;
+    let result = run(py, || {
+        engine::transfer_with_progress(&vertices, &triangles, normals.as_deref(), &settings, receivers.as_deref(), &mut |f| {
+            report.report(f)
+        })
+    });
+    let output = reporter.finish(result)?;
     Ok((matrix(output.transfer, n, output.coeffs, py), output.missing_normals))
 }
 
@@ -146,7 +203,7 @@ impl PySolver {
     }
 
     /// Transfer (N, bands^2) for this frame's positions.
-    #[pyo3(signature = (vertices, normals, view, views))]
+    #[pyo3(signature = (vertices, normals, view, views, progress=None))]
     fn solve<'py>(
         &mut self,
         py: Python<'py>,
@@ -154,6 +211,7 @@ impl PySolver {
         normals: Option<PyReadonlyArray2<f32>>,
         view: Option<PyReadonlyArray1<f32>>,
         views: Option<PyReadonlyArray2<f32>>,
+        progress: Option<Py<PyAny>>,
     ) -> PyResult<Bound<'py, PyArray2<f32>>> {
         let vertices = rows3(&vertices, "vertices")?;
         let normals = normals.map(|n| rows3(&n, "normals")).transpose()?;
@@ -161,7 +219,10 @@ impl PySolver {
         let n = vertices.len();
         let k = self.inner.coeffs();
         let inner = &mut self.inner;
-        let values = run(py, || inner.solve(&vertices, normals.as_deref(), view.as_ref()))?;
+        let mut reporter = PyProgress::new(progress);
+        let report = &mut reporter;
+        let result = run(py, || inner.solve_with_progress(&vertices, normals.as_deref(), view.as_ref(), &mut |f| report.report(f)));
+        let values = reporter.finish(result)?;
         Ok(matrix(values, n, k, py))
     }
 
@@ -270,6 +331,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(visibility_mask, m)?)?;
     m.add_function(wrap_pyfunction!(disk_cells, m)?)?;
     m.add_class::<PySolver>()?;
+    m.add("Cancelled", m.py().get_type::<Cancelled>())?;
     m.add("DEFAULT_TABLE_RESOLUTION", engine::plane_table::DEFAULT_RESOLUTION)?;
     m.add("MASK_SIDE", engine::disk_mask::MASK_SIDE)?;
     Ok(())

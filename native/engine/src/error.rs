@@ -1,4 +1,4 @@
-//! The engine's one error type: every failure a caller can cause by its input.
+//! The engine's one error type: every failure a caller can cause by its input, and cancellation.
 
 use std::fmt;
 
@@ -7,6 +7,8 @@ use std::fmt;
 pub enum Error {
     /// An argument has the wrong length, count or value; the message says which.
     InvalidInput(String),
+    /// The caller's progress callback asked to stop.
+    Cancelled,
 }
 
 impl Error {
@@ -19,6 +21,7 @@ impl fmt::Display for Error {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             Error::InvalidInput(message) => f.write_str(message),
+            Error::Cancelled => f.write_str("cancelled"),
         }
     }
 }

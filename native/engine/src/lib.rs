@@ -13,6 +13,7 @@ pub mod hierarchy;
 pub mod integrate;
 pub mod mesh;
 pub mod plane_table;
+pub mod progress;
 pub mod rasterizer;
 pub mod sh;
 pub mod sh_rotation;
@@ -21,5 +22,6 @@ pub mod transfer;
 
 pub use error::{Error, Result};
 pub use integrate::Brdf;
+pub use progress::Progress;
 pub use solver::{Blockers, Solver, Stats};
-pub use transfer::{transfer, Output, Settings, View};
+pub use transfer::{transfer, transfer_with_progress, Output, Settings, View};

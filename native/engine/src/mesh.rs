@@ -1,8 +1,13 @@
-//! Mesh preparation: input checks, welding by position, vertex normals and tangent frames.
+//! Mesh preparation: input checks, welding by position, normalisation, vertex normals and
+//! tangent frames.
 //!
 //! Imported meshes are split at UV seams and hard edges (glTF's Fox is an unindexed triangle
 //! soup). Transfer is computed on the mesh welded by exact position, so splits never change
 //! the result and a receiver's own incident triangles are known.
+//!
+//! Transfer depends on directions only, so the engine works on positions moved to the mesh's
+//! centre and divided by its size (`Normalization`): a mesh of 1 mm and one of 1 km, or one
+//! far from the origin, see the same numbers, and no tolerance in the engine is absolute.
 
 use std::collections::HashMap;
 
@@ -68,7 +73,55 @@ pub fn weld(vertices: &[Vec3], triangles: &[[u32; 3]]) -> Result<WeldedMesh> {
     Ok(WeldedMesh { positions, triangles, remap })
 }
 
+/// The similarity that maps a mesh into the unit box around the origin: `(p - centre) * scale`.
+/// Computed in f64 from the vertices used by triangles (loose vertices do not count).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Normalization {
+    centre: [f64; 3],
+    scale: f64,
+}
+
+impl Normalization {
+    pub fn of(positions: &[Vec3], triangles: &[[u32; 3]]) -> Self {
+        let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+        for &i in triangles.iter().flatten() {
+            let p = positions[i as usize];
+            for a in 0..3 {
+                lo[a] = lo[a].min(p[a] as f64);
+                hi[a] = hi[a].max(p[a] as f64);
+            }
+        }
+        let half_extent = (0..3).map(|a| 0.5 * (hi[a] - lo[a])).fold(0.0, f64::max);
+        let scale = if half_extent > 0.0 && half_extent.is_finite() { 1.0 / half_extent } else { 1.0 };
+        let centre = if lo[0].is_finite() { [0, 1, 2].map(|a| 0.5 * (lo[a] + hi[a])) } else { [0.0; 3] };
+        Normalization { centre, scale }
+    }
+
+    /// Lengths in mesh units -> normalised units.
+    pub fn scale(&self) -> f32 {
+        self.scale as f32
+    }
+
+    #[inline]
+    pub fn apply(&self, p: Vec3) -> Vec3 {
+        [0, 1, 2].map(|a| ((p[a] as f64 - self.centre[a]) * self.scale) as f32)
+    }
+
+    pub fn apply_all(&self, points: impl Iterator<Item = Vec3>) -> Vec<Vec3> {
+        points.map(|p| self.apply(p)).collect()
+    }
+}
+
 impl WeldedMesh {
+    /// The mesh moved and scaled into the unit box (see `Normalization`), and the map used.
+    pub fn normalized(mut self) -> (Self, Normalization) {
+        let normalization = Normalization::of(&self.positions, &self.triangles);
+        for p in &mut self.positions {
+            *p = normalization.apply(*p);
+        }
+        (self, normalization)
+    }
+
     /// For every welded vertex, the first input vertex that welded into it.
     pub fn first_copies(&self) -> Vec<u32> {
         let mut first = vec![u32::MAX; self.positions.len()];
@@ -181,6 +234,18 @@ mod tests {
         assert!(weld(&[[0.0; 3]], &[]).is_err());
         assert!(weld(&[[0.0; 3]], &[[0, 0, 1]]).is_err());
         assert!(weld(&[[f32::NAN, 0.0, 0.0]], &[[0, 0, 0]]).is_err());
+    }
+
+    #[test]
+    fn normalization_ignores_loose_vertices_and_size() {
+        let vertices = [[10.0, 0.0, 0.0], [12.0, 0.0, 0.0], [10.0, 4.0, 0.0], [1e6, 1e6, 1e6]];
+        let n = Normalization::of(&vertices, &[[0, 1, 2]]);
+        assert_eq!(n.apply([11.0, 2.0, 0.0]), [0.0, 0.0, 0.0]);
+        assert_eq!(n.apply([10.0, 4.0, 0.0]), [-0.5, 1.0, 0.0]);
+        let tiny: Vec<Vec3> = vertices.iter().map(|v| v.map(|c| c * 1e-3)).collect();
+        let m = Normalization::of(&tiny, &[[0, 1, 2]]);
+        let q = m.apply(tiny[2]);
+        assert!((q[0] + 0.5).abs() < 1e-6 && (q[1] - 1.0).abs() < 1e-6, "{q:?}");
     }
 
     #[test]

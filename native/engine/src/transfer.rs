@@ -2,13 +2,12 @@
 //! (Kautz et al. 2004, section 3: "for each vertex, we clear the visibility mask and
 //! rasterize all blocking triangles into it").
 
-use rayon::prelude::*;
-
 use crate::disk_mask::{disk, Mask};
 use crate::error::{Error, Result};
 use crate::integrate::{Brdf, Frame, Quadrature};
 use crate::mesh::{mean_edge_length, normalize, tangent_frame, weld, welded_normals, Vec3, WeldedMesh};
 use crate::plane_table::{PlaneTable, DEFAULT_RESOLUTION};
+use crate::progress::{par_rows, Progress};
 use crate::rasterizer::{dot, triangle_mask};
 use crate::sh::ShBasis;
 
@@ -81,13 +80,27 @@ struct Scene<'a> {
 }
 
 pub fn transfer(vertices: &[Vec3], triangles: &[[u32; 3]], normals: Option<&[Vec3]>, settings: &Settings) -> Result<Output> {
+    transfer_with_progress(vertices, triangles, normals, settings, None, &mut |_| true)
+}
+
+/// `transfer` of the input vertices listed in `receivers` only (rows in that order), or of all
+/// of them; reports the fraction done to `progress` (on this thread) and stops with
+/// `Error::Cancelled` when it returns false.
+pub fn transfer_with_progress(
+    vertices: &[Vec3],
+    triangles: &[[u32; 3]],
+    normals: Option<&[Vec3]>,
+    settings: &Settings,
+    receivers: Option<&[u32]>,
+    progress: Progress,
+) -> Result<Output> {
     let basis = ShBasis::new(settings.bands)?;
     check_brdf(settings.brdf)?;
     let downsample = checked_downsample(settings)?;
-    let mesh = weld(vertices, triangles)?;
+    let (mesh, normalization) = weld(vertices, triangles)?.normalized();
     let normals = welded_normals(&mesh.positions, &mesh.triangles, &mesh.remap, normals)?;
     let views = welded_views(&mesh.first_copies(), mesh.remap.len(), settings.brdf, settings.view.as_ref())?;
-    let offset = checked_offset(settings.offset, &mesh)?;
+    let offset = checked_offset(settings.offset, &mesh, normalization.scale())?;
     let table = PlaneTable::shared(settings.table_resolution)?;
     let scene = Scene {
         mesh: &mesh,
@@ -100,13 +113,21 @@ pub fn transfer(vertices: &[Vec3], triangles: &[[u32; 3]], normals: Option<&[Vec
         disk: disk(),
     };
     let k = scene.quadrature.basis().coeffs();
-    let mut welded = vec![0.0f32; mesh.positions.len() * k];
-    welded
-        .par_chunks_mut(k)
-        .enumerate()
-        .for_each_init(|| vec![[0.0f32; 3]; mesh.positions.len()], |local, (r, out)| scene.receiver(r, local, out));
-    let transfer = mesh.remap.iter().flat_map(|&w| welded[w as usize * k..(w as usize + 1) * k].iter().copied()).collect();
-    let missing_normals = mesh.remap.iter().filter(|&&w| normals[w as usize] == [0.0; 3]).count();
+    let scratch = || vec![[0.0f32; 3]; mesh.positions.len()];
+    let Some(receivers) = receivers else {
+        let mut welded = vec![0.0f32; mesh.positions.len() * k];
+        par_rows(&mut welded, k, progress, scratch, |r, local, out| scene.receiver(r, local, out))?;
+        let transfer = mesh.remap.iter().flat_map(|&w| welded[w as usize * k..(w as usize + 1) * k].iter().copied()).collect();
+        let missing_normals = mesh.remap.iter().filter(|&&w| normals[w as usize] == [0.0; 3]).count();
+        return Ok(Output { coeffs: k, transfer, missing_normals });
+    };
+    if let Some(&i) = receivers.iter().find(|&&i| i as usize >= vertices.len()) {
+        return Err(Error::invalid(format!("receiver {i} is not a vertex: the mesh has {} vertices", vertices.len())));
+    }
+    let rows: Vec<usize> = receivers.iter().map(|&i| mesh.remap[i as usize] as usize).collect();
+    let mut transfer = vec![0.0f32; rows.len() * k];
+    par_rows(&mut transfer, k, progress, scratch, |i, local, out| scene.receiver(rows[i], local, out))?;
+    let missing_normals = rows.iter().filter(|&&w| normals[w] == [0.0; 3]).count();
     Ok(Output { coeffs: k, transfer, missing_normals })
 }
 
@@ -128,10 +149,11 @@ pub(crate) fn checked_downsample(settings: &Settings) -> Result<usize> {
     Ok(downsample)
 }
 
-/// The receivers' offset along the normal: as given, or 1e-3 x the mean edge length.
-pub(crate) fn checked_offset(offset: Option<f32>, mesh: &WeldedMesh) -> Result<f32> {
+/// The receivers' offset along the normal in the normalised mesh's units: as given (in the
+/// input's units, times `scale`), or 1e-3 x the mean edge length.
+pub(crate) fn checked_offset(offset: Option<f32>, mesh: &WeldedMesh, scale: f32) -> Result<f32> {
     match offset {
-        Some(o) if o.is_finite() && o >= 0.0 => Ok(o),
+        Some(o) if o.is_finite() && o >= 0.0 => Ok(o * scale),
         Some(o) => Err(Error::invalid(format!("offset must be a finite, non-negative distance, got {o}"))),
         None => Ok(1e-3 * mean_edge_length(mesh)),
     }

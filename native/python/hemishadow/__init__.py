@@ -17,6 +17,7 @@ from .solver import TransferSolver
 
 __all__ = [
     "AO_UNOCCLUDED",
+    "Cancelled",
     "TransferSolver",
     "ambient_occlusion",
     "disk_cells",
@@ -37,6 +38,9 @@ AO_UNOCCLUDED = float(np.pi * 0.28209479177387814)
 
 BRDFS = _checks.BRDFS
 
+#: Raised by `transfer` and `TransferSolver.solve` when their progress callback returns False.
+Cancelled = _native.Cancelled
+
 
 def sh_basis(directions, bands=5):
     """Real SH basis values of unit directions (K, 3): float32 (K, bands*bands).
@@ -51,7 +55,7 @@ def sh_basis(directions, bands=5):
 
 
 def transfer(vertices, triangles, normals=None, *, bands=5, brdf="diffuse", exponent=None, view=None, offset=None,
-             downsample=None, table_resolution=_native.DEFAULT_TABLE_RESOLUTION):
+             downsample=None, table_resolution=_native.DEFAULT_TABLE_RESOLUTION, receivers=None, progress=None):
     """Per-vertex transfer vectors of a mesh: float32 (N, bands*bands).
 
     Every triangle is a potential blocker of every vertex (no hierarchy). Vertices that share
@@ -70,6 +74,11 @@ def transfer(vertices, triangles, normals=None, *, bands=5, brdf="diffuse", expo
         third of the error; see docs/algorithm.md). None: 4 for diffuse; for phong 2, or 1 above
         exponent 16.
     table_resolution: R of the 6 x R x R plane table (128 is the paper's 12 MiB table).
+    receivers: None for every vertex, or indices (R,) of the vertices to compute: the result is
+        then (R, bands*bands), row i for vertex receivers[i] (the whole mesh still blocks).
+    progress: None or a callable taking the fraction done (0..1), called on this thread between
+        chunks of vertices; returning False stops the work with `Cancelled`. Ctrl-C is honoured
+        between chunks either way.
     Vertices touched by no triangle and with no usable normal get zeros and a warning.
     """
     verts, tris = _checks.mesh(vertices, triangles)
@@ -78,7 +87,8 @@ def transfer(vertices, triangles, normals=None, *, bands=5, brdf="diffuse", expo
     view_one, view_each = _checks.view_arrays(brdf, view, len(verts))
     result, missing = _native.transfer(verts, tris, norms, _checks.band_count(bands), exponent, view_one, view_each,
                                        _checks.offset(offset), int(table_resolution),
-                                       None if downsample is None else int(downsample))
+                                       None if downsample is None else int(downsample),
+                                       _checks.indices(receivers, len(verts), "receivers"), _checks.progress(progress))
     if missing:
         warnings.warn(f"{missing} vertices touch no triangle of non-zero area and have no normal: their transfer is zero",
                       RuntimeWarning, stacklevel=2)

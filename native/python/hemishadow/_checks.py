@@ -99,3 +99,22 @@ def offset(value):
     if not (np.isfinite(value) and value >= 0):
         raise ValueError(f"offset must be a finite, non-negative distance, got {value!r}")
     return float(value)
+
+
+def progress(callback):
+    """A progress callback: None or a callable."""
+    if callback is not None and not callable(callback):
+        raise ValueError(f"progress must be a callable or None, got {type(callback).__name__}")
+    return callback
+
+
+def indices(values, count, what):
+    """None, or a 1-D array of indices below `count` as contiguous uint32."""
+    if values is None:
+        return None
+    array = np.asarray(values)
+    if array.ndim != 1 or not (np.issubdtype(array.dtype, np.integer) or array.size == 0):
+        raise ValueError(f"{what} must be a 1-D array of vertex indices, got shape {array.shape} of {array.dtype}")
+    if array.size and (array.min() < 0 or array.max() >= count):
+        raise ValueError(f"{what} must be vertex indices in 0..{count - 1}, got {array.min()}..{array.max()}")
+    return np.ascontiguousarray(array, dtype=np.uint32)

@@ -20,16 +20,20 @@ class TransferSolver:
     rest_vertices: (N, 3); triangles: (M, 3). bands, brdf, exponent, offset, downsample and
     table_resolution are those of `hemishadow.transfer` (the offset defaults to 1e-3 x the
     rest pose's mean edge length and then stays fixed).
-    near_scale: clusters whose centre lies within near_scale x their radius of a receiver are
-    seen at full resolution as well, whatever the surface distance (a coarse triangle that
-    close cuts through the real surface and would shadow falsely); 0 uses the ring only.
+    near_scale: clusters (a coarse triangle and the fine triangles it owns) whose centre lies
+    within near_scale x their radius of a receiver are seen at full resolution as well,
+    whatever the surface distance (a coarse triangle that close cuts through the real
+    surface and would shadow falsely); 0 uses the ring only. The default, 2.5, keeps every
+    vertex of the shared meshes and characters within 0.1 AO of the exact path.
+    Positions are moved and scaled into a unit box internally (by the rest pose's centre and
+    size), so results do not depend on the mesh's size or place.
     hierarchy=False makes every fine triangle a blocker (the exact path of `transfer`, with
     culling and reuse); cull and reuse switch those optimisations.
     """
 
     def __init__(self, rest_vertices, triangles, *, bands=5, brdf="diffuse", exponent=None, offset=None,
                  downsample=None, table_resolution=_native.DEFAULT_TABLE_RESOLUTION, hierarchy=True,
-                 coarse_triangles=None, ring=2, near_scale=1.5, cull=True, reuse=True):
+                 coarse_triangles=None, ring=2, near_scale=2.5, cull=True, reuse=True):
         rest, tris = _checks.mesh(rest_vertices, triangles, "rest_vertices")
         exponent = _checks.brdf_exponent(brdf, exponent)
         if not (np.isfinite(near_scale) and near_scale >= 0):
@@ -64,13 +68,15 @@ class TransferSolver:
         blockers, computed, reused = self._solver.stats()
         return {"blockers_per_vertex": blockers, "computed": computed, "reused": reused}
 
-    def solve(self, vertices, normals=None, view=None):
-        """Transfer (N, bands^2) float32 for this frame's positions (N, 3); normals and view as
-        in `hemishadow.transfer`."""
+    def solve(self, vertices, normals=None, view=None, *, progress=None):
+        """Transfer (N, bands^2) float32 for this frame's positions (N, 3); normals, view and
+        progress as in `hemishadow.transfer`. The GIL is released while receivers are computed,
+        so a solve may run in a worker thread; use one solver from one thread at a time. A
+        cancelled solve leaves the solver as it was."""
         verts = _checks.points(vertices, "vertices")
         if len(verts) != self.vertex_count:
             raise ValueError(f"the solver was built for {self.vertex_count} vertices, got {len(verts)}: "
                              "the topology changed, build a new solver")
         norms = None if normals is None else _checks.float_array(normals, "normals", (len(verts), 3))
         view_one, view_each = _checks.view_arrays(self.brdf, view, len(verts))
-        return self._solver.solve(verts, norms, view_one, view_each)
+        return self._solver.solve(verts, norms, view_one, view_each, _checks.progress(progress))

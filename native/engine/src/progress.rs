@@ -1,0 +1,66 @@
+//! Long computations run in chunks of receivers, with progress reports and cancellation
+//! between chunks, on the caller's thread (so a Python callback can run there).
+
+use rayon::prelude::*;
+
+use crate::error::{Error, Result};
+
+/// Called on the caller's thread with the fraction of receivers done; returning false cancels.
+pub type Progress<'a> = &'a mut dyn FnMut(f32) -> bool;
+
+/// Receivers per chunk: about 1/64 of the work, so progress moves smoothly, but never fewer
+/// than keep every core busy between reports.
+fn chunk_rows(rows: usize) -> usize {
+    (rows / 64).max(1024)
+}
+
+/// Runs `work(row, scratch, out_row)` for every row of `out` (`k` values each) on all cores,
+/// one chunk at a time, and reports progress after each chunk. `Err(Cancelled)` as soon as
+/// `progress` returns false; rows not reached are left as they were.
+pub fn par_rows<S>(
+    out: &mut [f32],
+    k: usize,
+    progress: Progress,
+    init: impl Fn() -> S + Sync + Send,
+    work: impl Fn(usize, &mut S, &mut [f32]) + Sync + Send,
+) -> Result<()> {
+    let rows = out.len() / k.max(1);
+    let chunk = chunk_rows(rows);
+    let mut done = 0;
+    for block in out.chunks_mut(chunk * k.max(1)) {
+        let first = done;
+        block.par_chunks_mut(k).enumerate().for_each_init(&init, |scratch, (i, row)| work(first + i, scratch, row));
+        done += block.len() / k;
+        if !progress(done as f32 / rows as f32) {
+            return Err(Error::Cancelled);
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_row_is_computed_once_and_progress_ends_at_one() {
+        let mut out = vec![0.0f32; 5000 * 2];
+        let mut reports = Vec::new();
+        par_rows(&mut out, 2, &mut |f| {
+            reports.push(f);
+            true
+        }, || (), |r, _, row| row.fill(r as f32))
+        .unwrap();
+        assert!(out.chunks(2).enumerate().all(|(r, row)| row == [r as f32, r as f32]));
+        assert_eq!(*reports.last().unwrap(), 1.0);
+        assert!(reports.windows(2).all(|w| w[0] < w[1]));
+    }
+
+    #[test]
+    fn cancelling_stops_after_the_current_chunk() {
+        let mut out = vec![-1.0f32; 100_000];
+        let result = par_rows(&mut out, 1, &mut |_| false, || (), |_, _, row| row[0] = 1.0);
+        assert_eq!(result, Err(Error::Cancelled));
+        assert!(out.iter().any(|&v| v == -1.0));
+    }
+}
