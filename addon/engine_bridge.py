@@ -13,9 +13,11 @@ Time is split into Blender I/O (reading the evaluated mesh, writing attributes) 
 time (transfer, shading), per object, in `last_timings`.
 """
 
+import itertools
+import threading
 import time
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -29,8 +31,10 @@ class _Entry:
     solver: object
     fingerprint: int | None = None  # hash of the positions (and view) in the object's frame, as solved
     solved: np.ndarray | None = None  # transfer in the object's frame
-    rotation: tuple | None = None  # the frame's rotation and offset `transfer` was turned and shaded at
+    placement: tuple | None = None  # the frame's rotation and offset `transfer` was turned and shaded at
     transfer: np.ndarray | None = None  # in world space
+    written: int = -1  # Request.serial of `transfer`: an older request's result is never written over it
+    lock: threading.Lock = field(default_factory=threading.Lock)  # one thread at a time per solver
 
 
 @dataclass
@@ -93,6 +97,84 @@ def _view_directions(obj, scene, vertices, frame=None):
     return view
 
 
+@dataclass(eq=False)
+class Request:
+    """One object's solver inputs, read on the main thread. It holds no Blender data, so any
+    thread may solve it (jobs.py does, in a worker)."""
+
+    uid: int
+    entry: _Entry
+    vertices: np.ndarray
+    normals: np.ndarray | None
+    view: np.ndarray | None
+    fingerprint: int
+    io_seconds: float
+    serial: int  # order of reading: a later read has newer positions
+    solve_seconds: float = 0.0  # set by solve_object
+    name: str = ""  # the object's, for error messages
+    frame: mesh_io.Frame | None = None  # `vertices` and `view` are in it
+    placement: tuple | None = None  # where the frame is in the world (see read_object)
+    solved: np.ndarray | None = None  # the transfer of these positions, known already: nothing to solve
+
+
+#: ID.session_uid -> seconds of the object's last solve (jobs.py tells heavy objects by it).
+solve_seconds: dict[int, float] = {}
+_serials = itertools.count()
+
+
+def read_object(obj, depsgraph, scene, *, force=False):
+    """Main thread: the Request for the object's evaluated mesh; None when the positions (and
+    view) are those of the last computation and `force` is false. Raises mesh_io.SkipObject
+    (or the engine's ValueError building a solver), the message starting with the object's name."""
+    t0 = time.perf_counter()
+    try:
+        vertices, triangles, normals, frame = mesh_io.read_in_frame(obj, depsgraph)
+    except mesh_io.TopologyChanged as error:
+        raise mesh_io.TopologyChanged(_drop_stale(obj, error)) from error
+    view = _view_directions(obj, scene, vertices, frame)
+    t1 = time.perf_counter()
+    with named_errors(obj):
+        entry = _solver_for(obj, vertices, triangles, frame.matrix)
+    fingerprint = hash((vertices.tobytes(), None if view is None else view.tobytes()))
+    # Where the frame is in the world: turning changes the transfer, moving the lamps' light.
+    placement = None if frame.rotation is None else (frame.rotation.tobytes(), frame.offset.tobytes())
+    solved = entry.solved is not None and entry.fingerprint == fingerprint
+    written = mesh_io.RADIANCE in obj.data.attributes  # gone after Clear, or undone
+    if not force and written and solved and entry.transfer is not None and entry.placement == placement:
+        entry.written = next(_serials)  # still current: results of requests read before this one are older
+        return None
+    return Request(obj.session_uid, entry, vertices, normals, view, fingerprint, t1 - t0, next(_serials),
+                   name=obj.name, frame=frame, placement=placement,
+                   solved=entry.solved if solved and not force else None)
+
+
+def solve_object(request, progress=None):
+    """Any thread, no Blender data: the transfer vectors of a Request. `progress` as the
+    engine's (returning False raises hemishadow.Cancelled). In the object's frame: see
+    `to_world_transfer`. A rigid motion of the object needs no solve."""
+    if request.solved is not None:
+        return request.solved
+    with request.entry.lock, _named(request.name):
+        t0 = time.perf_counter()
+        transfer = request.entry.solver.solve(request.vertices, request.normals, request.view, progress=progress)
+        request.solve_seconds = seconds = time.perf_counter() - t0
+    # The engine answers a repeated solve of the same positions from a cache in no time:
+    # decay rather than forget, so a heavy object does not pass for light after one.
+    solve_seconds[request.uid] = max(seconds, solve_seconds.get(request.uid, 0.0) / 2)
+    return transfer
+
+
+def _shade_request(obj, scene, request, transfer, lighting):
+    t0 = time.perf_counter()
+    entry, frame = request.entry, request.frame
+    entry.solved, entry.fingerprint, entry.written = transfer, request.fingerprint, request.serial
+    entry.transfer, entry.placement = to_world_transfer(transfer, frame.rotation), request.placement
+    result = _shade(obj, scene, entry.transfer, lighting, mesh_io.frame_to_world(request.vertices, frame))
+    result.io_seconds = request.io_seconds
+    result.engine_seconds = request.solve_seconds + time.perf_counter() - t0
+    return result
+
+
 def compute_object(obj, depsgraph, scene, *, force=False, lighting=None):
     """Transfer, AO and radiance of the object's evaluated mesh, as a Result; None when the
     positions (and view) are those of the last computation and `force` is false.
@@ -102,25 +184,12 @@ def compute_object(obj, depsgraph, scene, *, force=False, lighting=None):
     The engine computes in the object's frame (mesh_io.object_frame): a turned or mirrored
     object gets exactly the turned or mirrored transfer, and a rigid motion solves nothing."""
     with named_errors(obj):
-        t0 = time.perf_counter()
-        vertices, triangles, normals, frame = mesh_io.read_in_frame(obj, depsgraph)
-        view = _view_directions(obj, scene, vertices, frame)
-        t1 = time.perf_counter()
-        entry = _solver_for(obj, vertices, triangles, frame.matrix)
-        fingerprint = hash((vertices.tobytes(), None if view is None else view.tobytes()))
-        # Where the frame is in the world: turning changes the transfer, moving the lamps' light.
-        rotation = None if frame.rotation is None else (frame.rotation.tobytes(), frame.offset.tobytes())
-        solved = entry.solved is not None and entry.fingerprint == fingerprint
-        written = mesh_io.RADIANCE in obj.data.attributes  # gone after Clear, or undone
-        if not force and written and solved and entry.transfer is not None and entry.rotation == rotation:
+        request = read_object(obj, depsgraph, scene, force=force)
+        if request is None:
             return None
-        if force or not solved:
-            entry.solved, entry.fingerprint, entry.transfer = None, None, None  # no stale pair if solve raises
-            entry.solved, entry.fingerprint = entry.solver.solve(vertices, normals, view), fingerprint
-        entry.transfer, entry.rotation = to_world_transfer(entry.solved, frame.rotation), rotation
-        result = _shade(obj, scene, entry.transfer, lighting, mesh_io.frame_to_world(vertices, frame))
-        result.io_seconds, result.engine_seconds = t1 - t0, time.perf_counter() - t1
-        return result
+        if request.solved is None:  # never keep a stale pair if solve raises
+            request.entry.solved, request.entry.transfer, request.entry.fingerprint = None, None, None
+        return _shade_request(obj, scene, request, solve_object(request), lighting)
 
 
 def to_world_transfer(transfer, rotation):
@@ -135,19 +204,48 @@ def to_world_transfer(transfer, rotation):
     return np.ascontiguousarray(transfer @ turn.T, dtype=np.float32)
 
 
-@contextmanager
+def obsolete(request):
+    """True when a Request's result must not be written: the object's solver changed, or the
+    result of a request read later has been written (or found current) already."""
+    entry = request.entry
+    return _entries.get(request.uid) is not entry or entry.written > request.serial
+
+
+def finish_object(obj, scene, request, transfer, lighting=None):
+    """Main thread: shade and write a transfer that solve_object computed elsewhere; returns
+    the Result, or None when it is obsolete: the object's solver changed meanwhile, or a
+    request read later has been written already. Errors are raised as by update_object, the
+    status line is set either way."""
+    if obsolete(request):
+        return None
+    try:
+        with named_errors(obj):
+            mesh_io.check_computable(obj)
+            result = _shade_request(obj, scene, request, transfer, lighting)
+    except (ValueError, RuntimeError) as error:
+        set_status(obj, str(error))
+        raise
+    _publish(obj, result, _note(obj, scope.shared_users(scene, [obj])))
+    return result
+
+
 def named_errors(obj):
     """Re-raise ValueError / RuntimeError (the engine's, Blender's) with the object's name in
     front, so every message path says which object failed."""
+    return _named(obj.name)
+
+
+@contextmanager
+def _named(name):
     try:
         yield
     except (ValueError, RuntimeError) as error:
-        if str(error).startswith(f"{obj.name}: "):
+        if not name or str(error).startswith(f"{name}: "):
             raise
         try:
-            named = type(error)(f"{obj.name}: {error}")
+            named = type(error)(f"{name}: {error}")
         except TypeError:  # an exception class with another constructor
-            named = RuntimeError(f"{obj.name}: {error}")
+            named = RuntimeError(f"{name}: {error}")
         raise named from error
 
 
@@ -204,19 +302,19 @@ def update_object(obj, depsgraph, scene, *, force=False, lighting=None, note="")
     appended to it on success)."""
     try:
         result = compute_object(obj, depsgraph, scene, force=force, lighting=lighting)
-    except mesh_io.TopologyChanged as error:
-        message = _drop_stale(obj, error)
-        set_status(obj, message)
-        raise mesh_io.TopologyChanged(message) from error
     except (ValueError, RuntimeError) as error:
         set_status(obj, str(error))
         raise
     if result is None:
         return None
+    _publish(obj, result, note)
+    return result
+
+
+def _publish(obj, result, note=""):
     result.io_seconds += _write(obj, result)
     last_timings[obj.name] = (len(result.ao), result.io_seconds, result.engine_seconds)
     set_status(obj, _summary(obj, result) + note)
-    return result
 
 
 def enabled_objects(scene):
@@ -303,6 +401,7 @@ def _mark_followers(owner, shared):
     for user in shared.get(owner.data.session_uid, ()):
         if user.session_uid != owner.session_uid:
             forget(user)  # a former owner must not re-shade the shared mesh with its own transfer
+            solve_seconds.pop(user.session_uid, None)  # nor be sent to the worker as a heavy object
             set_status(user, scope.follower_status(user, owner))
 
 

@@ -16,12 +16,16 @@ of an animated World that were not precomputed.
 
 No error leaves a handler: engine and input errors go to the object's status line and the
 console.
+
+Heavy objects go to a worker thread (jobs.py) when Blender itself changed the frame or the
+data in a window; renders, scripts and background mode compute synchronously. A render
+waits for the jobs first, and computes synchronously from render_init to its end.
 """
 
 import bpy
 from bpy.app.handlers import persistent
 
-from . import cache, engine_bridge, evaluated, lighting, world_render
+from . import cache, engine_bridge, evaluated, jobs, lighting, world_render
 
 _busy = False
 #: scene name -> lighting.fingerprint the objects were last shaded with.
@@ -93,7 +97,8 @@ def _reshade_if_lighting_changed(scene, live=None, named=False):
 @_live_and_idle
 def on_frame_change(scene, depsgraph):
     live = _live_objects(scene, depsgraph)
-    _report(engine_bridge.update_scene(scene, depsgraph, live))
+    jobs.drop([o for o in engine_bridge.enabled_objects(scene) if o not in live], scene.frame_current)  # cached
+    _report(jobs.update_scene(scene, depsgraph, live, interactive=jobs.interactive()))
     _reshade_if_lighting_changed(scene, live)
 
 
@@ -113,22 +118,39 @@ def _lighting_updated(depsgraph):
 def on_depsgraph_update(scene, depsgraph):
     objects = [o for o in _deformed_objects(scene, depsgraph) if not _cache_handled(o, scene, depsgraph)]
     if objects:
-        _report(engine_bridge.update_scene(scene, depsgraph, objects))
+        _report(jobs.update_scene(scene, depsgraph, objects, interactive=jobs.interactive()))
     _reshade_if_lighting_changed(scene, named=_lighting_updated(depsgraph))
 
 
 @persistent
 def on_load(_):
+    jobs.reset()
     engine_bridge.forget()
     _lighting_seen.clear()
 
 
 @persistent
 def on_render_init(scene, *_):
-    """Renders cannot render the World themselves: say which frames have no projection."""
-    if world_render.probing() or not scene.hemishadow.live:
+    """Renders compute synchronously (jobs.py); they cannot render the World themselves: say
+    which frames have no projection."""
+    if world_render.probing():
         return
-    lighting.check_before_render(scene)
+    jobs.set_rendering(True)
+    if scene.hemishadow.live:
+        lighting.check_before_render(scene)
+
+
+@persistent
+def on_render_pre(scene, *_):
+    """A rendered frame is never stale: wait for the heavy objects computing in the background."""
+    if not world_render.probing():
+        jobs.finish_all(recompute_cancelled=scene.hemishadow.live)
+
+
+@persistent
+def on_render_end(scene, *_):
+    if not world_render.probing():
+        jobs.set_rendering(False)
 
 
 @persistent
@@ -141,6 +163,9 @@ _HANDLERS = (
     (bpy.app.handlers.depsgraph_update_post, on_depsgraph_update),
     (bpy.app.handlers.load_post, on_load),
     (bpy.app.handlers.render_init, on_render_init),
+    (bpy.app.handlers.render_pre, on_render_pre),
+    (bpy.app.handlers.render_complete, on_render_end),
+    (bpy.app.handlers.render_cancel, on_render_end),
     (bpy.app.handlers.undo_post, on_undo_redo),
     (bpy.app.handlers.redo_post, on_undo_redo),
 ) + cache.HANDLERS   # stale-cache checks: playback and render start, edits, undo, loads
@@ -158,4 +183,5 @@ def unregister():
         for old in [h for h in handlers if getattr(h, "__name__", None) == function.__name__
                     and getattr(h, "__module__", None) == function.__module__]:
             handlers.remove(old)
+    jobs.reset()
     engine_bridge.forget()

@@ -2,7 +2,7 @@
 
 import bpy
 
-from . import cache, engine_bridge, mesh_io
+from . import cache, engine_bridge, jobs, mesh_io
 from . import objects as scope
 
 # Objects the panels show: meshes, and the kinds hemishadow refuses (to say so).
@@ -41,6 +41,8 @@ def draw_object_settings(layout, obj, scene):
     if settings.status:
         column.label(text=settings.status, icon="INFO")
     cache.draw_status(column, obj)
+    if jobs.pending([obj]):
+        column.operator("hemishadow.cancel_jobs", icon="CANCEL")
     timing = engine_bridge.last_timings.get(obj.name)
     if timing:
         column.label(text=f"{timing[0]} vertices: engine {timing[2] * 1e3:.0f} ms, Blender I/O {timing[1] * 1e3:.0f} ms")

@@ -40,6 +40,10 @@ def _live_changed(self, context):
         from . import engine_bridge
 
         engine_bridge.update_scene(context.scene, context.evaluated_depsgraph_get())
+    else:
+        from . import jobs
+
+        jobs.cancel()  # heavy objects computing in the background stop, keeping their (stale) result
 
 
 # Enum items built by a callback must stay referenced, or Blender shows garbage names.

@@ -7,22 +7,33 @@ import bpy
 
 from .. import engine_bridge, material, mesh_io
 from .. import objects as scope
+from .jobs import ComputeInBackground
 
 _TARGETS = [("AUTO", "Auto", "Selected meshes when any are selected, else all enabled objects"),
             ("SELECTED", "Selected", "Selected mesh objects"),
             ("ENABLED", "Enabled", "All objects with hemishadow enabled")]
 
 
+def _selected(context):
+    # Curves, text and the like too, so that the report says why they are not computed.
+    return [o for o in context.selected_objects if o.type == "MESH" or o.type in mesh_io.NOT_A_MESH]
+
+
+def asks_all(context, target):
+    """True when the target is every enabled object rather than the selected ones."""
+    return target == "ENABLED" or (target == "AUTO" and not _selected(context))
+
+
 def target_objects(context, target):
-    """The objects asked for, or None for every enabled object. Selected curves, text and the
-    like are included so that the report says why they are not computed."""
-    selected = [o for o in context.selected_objects if o.type == "MESH" or o.type in mesh_io.NOT_A_MESH]
-    if target == "SELECTED" or (target == "AUTO" and selected):
-        return selected
-    return None
+    """The objects asked for (the selected ones, or every enabled object of the scene) as they
+    are computed: one per shared mesh, its owner (objects.py), and those that are not meshes,
+    which update_scene refuses with a message."""
+    scene = context.scene
+    asked = [o for o in scene.objects if o.hemishadow.enabled] if asks_all(context, target) else _selected(context)
+    return scope.owners(scene, asked)[0] + [o for o in asked if o.type != "MESH"]
 
 
-class HEMISHADOW_OT_compute(bpy.types.Operator):
+class HEMISHADOW_OT_compute(ComputeInBackground, bpy.types.Operator):
     """Compute self-shadowing now and write the hemishadow_ attributes"""
 
     bl_idname = "hemishadow.compute"
@@ -32,7 +43,7 @@ class HEMISHADOW_OT_compute(bpy.types.Operator):
     target: bpy.props.EnumProperty(name="Objects", items=_TARGETS, default="AUTO")
 
     def execute(self, context):
-        objects = target_objects(context, self.target)
+        objects = None if asks_all(context, self.target) else target_objects(context, self.target)
         computed, errors, warnings = engine_bridge.compute_now(context.scene, context.evaluated_depsgraph_get(),
                                                                objects)
         if not computed:
@@ -71,10 +82,7 @@ class HEMISHADOW_OT_clear(bpy.types.Operator):
     target: bpy.props.EnumProperty(name="Objects", items=_TARGETS, default="AUTO")
 
     def execute(self, context):
-        objects = target_objects(context, self.target)
-        if objects is None:
-            objects = engine_bridge.enabled_objects(context.scene)
-        objects = [o for o in objects if o.type == "MESH" and o.mode != "EDIT"]
+        objects = [o for o in target_objects(context, self.target) if o.type == "MESH" and o.mode != "EDIT"]
         removed = 0
         for obj in objects:
             removed += mesh_io.clear_outputs(obj)

@@ -452,6 +452,10 @@ def test_engine_errors_name_the_object(scene, monkeypatch):
     assert errors == {"monkey": "monkey: engine exploded"}
     with pytest.raises(RuntimeError, match="monkey: engine exploded"):
         bpy.ops.hemishadow.compute()
+    # The worker path (heavy meshes) solves a Request that holds no Blender data: named too.
+    request = engine_bridge.read_object(obj, bpy.context.evaluated_depsgraph_get(), scene, force=True)
+    with pytest.raises(RuntimeError, match="^monkey: engine exploded$"):
+        engine_bridge.solve_object(request)
 
 
 def test_solver_construction_errors_name_the_object(scene):
