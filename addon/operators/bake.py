@@ -119,21 +119,21 @@ class BakeJob:
             raise ValueError(f"cache location must be FILE or PACKED, got {self.location!r}")
 
     def _frame_input(self, obj, depsgraph) -> "FrameInput":
-        vertices, triangles, normals = mesh_io.read_evaluated(obj, depsgraph)
+        vertices, triangles, normals, frame = mesh_io.read_in_frame(obj, depsgraph)
         # The topology can change inside a range (a modifier switched by animation): rebuild then.
         # The key is kept here: a solver is busy in the worker thread and must not be asked.
         key = (len(vertices), hash(triangles.tobytes()))
         known = self._solvers.get(obj.name)
         if known is None or known[0] != key:
-            known = self._solvers[obj.name] = (key, _make_solver(obj, vertices, triangles))
+            known = self._solvers[obj.name] = (key, _make_solver(obj, vertices, triangles, frame.matrix))
         solver = known[1]
         _, albedo = self._shading[obj.name]
         lighting = engine_bridge.scene_lighting(self.scene, obj.hemishadow.band_count)   # this frame's
-        view = engine_bridge._view_directions(obj, self.scene, vertices)   # None for diffuse
+        view = engine_bridge._view_directions(obj, self.scene, vertices, frame)   # None for diffuse
         self._fingerprints[obj.name][self.scene.frame_current] = staleness.fingerprint(
-            vertices, cache._eye(obj, self.scene))
+            mesh_io.frame_to_world(vertices, frame), cache._eye(obj, self.scene))
         frame_lamps = self._lamps[self.scene.frame_current][0]
-        return FrameInput(solver, vertices, normals, view, lighting, albedo, frame_lamps)
+        return FrameInput(solver, vertices, normals, view, lighting, albedo, frame_lamps, frame)
 
     def _object_meta(self, obj) -> dict:
         return dict(version=cache.VERSION, object=obj.name, frame_start=self.frame_start,
@@ -236,22 +236,24 @@ class BakeJob:
 class FrameInput:
     """One object's arrays for one frame, and the solver that turns them into transfer."""
 
-    __slots__ = ("solver", "vertices", "normals", "view", "lighting", "albedo", "lamps")
+    __slots__ = ("solver", "vertices", "normals", "view", "lighting", "albedo", "lamps", "frame")
 
-    def __init__(self, solver, vertices, normals, view, lighting, albedo, lamps=()):
+    def __init__(self, solver, vertices, normals, view, lighting, albedo, lamps=(), frame=None):
+        """`vertices` (and `view`) in the object's frame (mesh_io.read_in_frame)."""
         self.solver, self.vertices, self.normals, self.view = solver, vertices, normals, view
-        self.lighting, self.albedo, self.lamps = lighting, albedo, lamps
+        self.lighting, self.albedo, self.lamps, self.frame = lighting, albedo, lamps, frame
 
     def compute(self, progress=None):
         """Worker thread: (transfer (V, K), radiance (V, 3), ao (V,)). `progress` is the engine's
         (a False return stops it with hemishadow.Cancelled)."""
         import hemishadow
 
-        transfer = self.solver.solve(self.vertices, self.normals, view=self.view, progress=progress)
+        solved = self.solver.solve(self.vertices, self.normals, view=self.view, progress=progress)
+        transfer = engine_bridge.to_world_transfer(solved, self.frame.rotation)
         radiance = hemishadow.shade(transfer, self.lighting, self.albedo)
         if self.lamps:   # numpy only: safe in the worker
             radiance += np.asarray(self.albedo, np.float32) / np.pi * lamps.lamp_irradiance(
-                transfer, self.vertices, self.lamps)
+                transfer, mesh_io.frame_to_world(self.vertices, self.frame), self.lamps)
         return transfer, radiance, hemishadow.ambient_occlusion(transfer)
 
 
@@ -276,13 +278,13 @@ def _was_cancelled(future) -> bool:
 
 # -- the live path's pieces (mesh_io, engine_bridge), used the same way -------------------------
 
-def _make_solver(obj, vertices, triangles):
+def _make_solver(obj, vertices, triangles, frame_matrix=None):
     import hemishadow
 
     settings = obj.hemishadow
     phong = settings.brdf == "PHONG"
     # Built from the same rest pose as the live path's solver, so both compute the same values.
-    return hemishadow.TransferSolver(mesh_io.read_rest(obj), triangles, bands=settings.band_count,
+    return hemishadow.TransferSolver(mesh_io.read_rest(obj, frame_matrix), triangles, bands=settings.band_count,
                                      brdf=settings.brdf.lower(),
                                      exponent=settings.exponent if phong else None)
 

@@ -441,7 +441,7 @@ def test_worker_never_touches_blender_data(scene, lower_threshold, monkeypatch):
     obj = suzanne(2)
     first_result(scene, obj)
     threads = {}
-    for module, name in ((mesh_io, "read_evaluated"), (mesh_io, "write_outputs"), (engine_bridge, "set_status"),
+    for module, name in ((mesh_io, "read_in_frame"), (mesh_io, "write_outputs"), (engine_bridge, "set_status"),
                          (engine_bridge, "read_object"), (engine_bridge, "finish_object"),
                          (engine_bridge, "solve_object")):
         real = getattr(module, name)
@@ -470,7 +470,7 @@ def test_worker_never_touches_blender_data(scene, lower_threshold, monkeypatch):
         threading.setprofile(None)
     main = threading.main_thread().name
     assert threads["solve_object"] == {"hemishadow-jobs"}
-    for name in ("read_evaluated", "write_outputs", "set_status", "read_object", "finish_object"):
+    for name in ("read_in_frame", "write_outputs", "set_status", "read_object", "finish_object"):
         assert threads[name] == {main}, name
     assert f"{jobs.__package__}.engine_bridge" in calls  # the profile saw the worker
     assert not [c for c in calls if c == "bpy data" or c.startswith(("bpy", "bl_"))], set(calls)
