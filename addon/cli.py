@@ -13,7 +13,6 @@ progress through the vertices, `bake` the frames (and the vertices within them).
 from __future__ import annotations
 
 import argparse
-import contextlib
 import sys
 import time
 
@@ -119,7 +118,9 @@ def _scene(name):
 
 def _objects(scene, names):
     if not names:
-        objects = [o for o in scene.objects if o.type == "MESH" and o.hemishadow.enabled]
+        from . import engine_bridge
+
+        objects = engine_bridge.enabled_objects(scene)  # one per mesh: linked duplicates share a result
         if not objects:
             raise UsageError(f"{PROG}: error: no object has hemishadow enabled: name them with --objects")
         return objects
@@ -135,30 +136,16 @@ def _objects(scene, names):
     return objects
 
 
+def _named(name, message):
+    """The message, with the object's name in front unless it starts with it already."""
+    return message if message.startswith(f"{name}:") else f"{name}: {message}"
+
+
 def _progress_bar(label):
     from hemishadow.cli import ProgressBar, cancel_on_ctrl_c
 
     bar = ProgressBar(label)
     return bar, cancel_on_ctrl_c(bar.interrupted)
-
-
-@contextlib.contextmanager
-def _engine_progress(callback):
-    """The live path (engine_bridge) solves without a progress callback: for the command's
-    duration, every TransferSolver.solve that gets none gets `callback`. Background mode
-    computes on this thread only, so nothing else sees it."""
-    import hemishadow
-
-    solve = hemishadow.TransferSolver.solve
-
-    def solve_with_progress(self, *args, progress=None, **kwargs):
-        return solve(self, *args, progress=progress or callback, **kwargs)
-
-    hemishadow.TransferSolver.solve = solve_with_progress
-    try:
-        yield
-    finally:
-        hemishadow.TransferSolver.solve = solve
 
 
 def _compute(scene, objects, args) -> bool:
@@ -174,10 +161,10 @@ def _compute(scene, objects, args) -> bool:
     depsgraph = bpy.context.evaluated_depsgraph_get()
     engine_bridge.last_timings.clear()
     bar, interrupts = _progress_bar("compute")
-    with interrupts, _engine_progress(bar):
+    with interrupts:
         try:
             bar(0.0)
-            errors = engine_bridge.update_scene(scene, depsgraph, objects, force=True)
+            errors = engine_bridge.update_scene(scene, depsgraph, objects, force=True, progress=bar)
         except hemishadow.Cancelled:
             return False
         finally:
@@ -191,7 +178,7 @@ def _compute(scene, objects, args) -> bool:
         print(f"hemishadow: {obj.name}: frame {frame}: {count} vertices, engine {engine_seconds * 1e3:.1f} ms, "
               f"Blender I/O {io_seconds * 1e3:.1f} ms")
     if errors:
-        raise RuntimeError("; ".join(f"{name}: {message}" for name, message in errors.items()))
+        raise RuntimeError("; ".join(_named(name, message) for name, message in errors.items()))
     print(f"hemishadow: computed {len(objects)} object(s) in {(time.perf_counter() - t0):.2f} s")
     return True
 

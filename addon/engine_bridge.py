@@ -175,9 +175,10 @@ def _shade_request(obj, scene, request, transfer, lighting):
     return result
 
 
-def compute_object(obj, depsgraph, scene, *, force=False, lighting=None):
+def compute_object(obj, depsgraph, scene, *, force=False, lighting=None, progress=None):
     """Transfer, AO and radiance of the object's evaluated mesh, as a Result; None when the
-    positions (and view) are those of the last computation and `force` is false.
+    positions (and view) are those of the last computation and `force` is false. `progress`
+    is the engine's (hemishadow.Cancelled when it returns False).
     Raises mesh_io.SkipObject, or the engine's ValueError / RuntimeError, each message
     starting with the object's name.
 
@@ -189,7 +190,7 @@ def compute_object(obj, depsgraph, scene, *, force=False, lighting=None):
             return None
         if request.solved is None:  # never keep a stale pair if solve raises
             request.entry.solved, request.entry.transfer, request.entry.fingerprint = None, None, None
-        return _shade_request(obj, scene, request, solve_object(request), lighting)
+        return _shade_request(obj, scene, request, solve_object(request, progress), lighting)
 
 
 def to_world_transfer(transfer, rotation):
@@ -296,12 +297,12 @@ def _drop_stale(obj, error):
     return f"{error}; its hemishadow outputs are removed until it can be computed again (they would be stale)"
 
 
-def update_object(obj, depsgraph, scene, *, force=False, lighting=None, note=""):
+def update_object(obj, depsgraph, scene, *, force=False, lighting=None, note="", progress=None):
     """Compute and write one object's outputs; returns the Result or None (nothing moved).
     Errors are raised as by compute_object; the status line is set either way (`note` is
     appended to it on success)."""
     try:
-        result = compute_object(obj, depsgraph, scene, force=force, lighting=lighting)
+        result = compute_object(obj, depsgraph, scene, force=force, lighting=lighting, progress=progress)
     except (ValueError, RuntimeError) as error:
         set_status(obj, str(error))
         raise
@@ -349,9 +350,10 @@ def _note(obj, shared):
     return note + (f"; {instanced}" if instanced else "")
 
 
-def update_scene(scene, depsgraph, objects=None, *, force=False):
+def update_scene(scene, depsgraph, objects=None, *, force=False, progress=None):
     """update_object for each object (default: the enabled ones); returns {name: error message}
-    for those that were not computed, without raising. Of objects sharing a mesh only the owner
+    for those that were not computed, without raising (hemishadow.Cancelled excepted: `progress`
+    is given the fraction of all objects done, and stops the work by returning False). Of objects sharing a mesh only the owner
     is computed (objects.py): the others asked for are returned with a message naming it.
     By default (Live switched on) also reports enabled objects that are not meshes or that are
     only instanced from outside the scene."""
@@ -368,13 +370,15 @@ def update_scene(scene, depsgraph, objects=None, *, force=False):
             set_status(obj, errors[obj.name])
     shared = scope.shared_users(scene, computed)
     lighting = {}
-    for obj in computed:
+    for i, obj in enumerate(computed):
+        share = None if progress is None else (lambda f, i=i: progress((i + f) / len(computed)))
         bands = obj.hemishadow.band_count
         try:
             with named_errors(obj):
                 if bands not in lighting:
                     lighting[bands] = scene_lighting(scene, bands)
-            update_object(obj, depsgraph, scene, force=force, lighting=lighting[bands], note=_note(obj, shared))
+            update_object(obj, depsgraph, scene, force=force, lighting=lighting[bands], note=_note(obj, shared),
+                          progress=share)
         except (ValueError, RuntimeError) as error:
             errors[obj.name] = str(error)
             set_status(obj, str(error))

@@ -42,8 +42,8 @@ def _cache_handled(obj, scene, depsgraph):
 
 
 def _report(errors):
-    for name, message in errors.items():
-        print(f"hemishadow: {name}: {message}")
+    for name, message in errors.items():  # engine_bridge's messages start with the object's name
+        print(f"hemishadow: {message if message.startswith(f'{name}:') else f'{name}: {message}'}")
 
 
 def _live_objects(scene, depsgraph=None):
