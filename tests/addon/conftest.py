@@ -23,3 +23,19 @@ def addon():
     yield package
     if registered_here:
         package.unregister()
+
+
+@pytest.fixture
+def scene():
+    """An empty factory scene with the repository's add-on registered for the test and a
+    uniform sky (no HDRI projection: fast and exact)."""
+    if str(ROOT) not in sys.path:
+        sys.path.insert(0, str(ROOT))
+    import addon as package
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    package.register()
+    scene = bpy.context.scene
+    scene.hemishadow.lighting_source = "UNIFORM"
+    yield scene
+    package.unregister()

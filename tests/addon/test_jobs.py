@@ -25,16 +25,6 @@ import addon  # noqa: E402
 from addon import engine_bridge, jobs, mesh_io  # noqa: E402
 
 
-@pytest.fixture
-def scene():
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    addon.register()
-    scene = bpy.context.scene
-    scene.hemishadow.lighting_source = "UNIFORM"
-    yield scene
-    addon.unregister()
-
-
 class Gate:
     """Jobs wait in the worker, before the engine, until `open()`: the test decides what is
     running when. Synchronous solves (main thread) pass."""

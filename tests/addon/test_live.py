@@ -21,16 +21,6 @@ import addon  # noqa: E402
 from addon import engine_bridge, mesh_io  # noqa: E402
 
 
-@pytest.fixture
-def scene():
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    addon.register()
-    scene = bpy.context.scene
-    scene.hemishadow.lighting_source = "UNIFORM"  # no HDRI projection: fast and exact
-    yield scene
-    addon.unregister()
-
-
 # -- helpers -------------------------------------------------------------------------------
 
 def import_character(name):
