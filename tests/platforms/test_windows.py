@@ -1,0 +1,124 @@
+"""The Windows x64 zip: its engine imports and computes under Wine, in the official embeddable
+Windows CPython 3.13 (scripts/setup_platforms.sh unpacks it into build/platforms/), with numpy's
+win_amd64 wheel, and gives the linux engine's numbers; OpenEXR's cp313 wheel from the zip reads
+an EXR written here. Wine 8 lacks bcryptprimitives.dll (Windows 10 and later have it), so a
+tiny mingw-built stand-in (bcryptprimitives_stub.c) is put beside python.exe for this test.
+Also checked statically: the engine links python3.dll (the stable ABI), not python313.dll."""
+
+import json
+import os
+import pathlib
+import shutil
+import subprocess
+import sys
+import zipfile
+
+import numpy as np
+import pytest
+
+from zips import ROOT, engine_wheel, extract_member, platform_zip, wheels_in
+
+hemishadow = pytest.importorskip("hemishadow")
+
+PLATFORM_DIR = ROOT / "build" / "platforms"
+EMBED = PLATFORM_DIR / "python-3.13.0"
+MINGW = "x86_64-w64-mingw32-"
+
+# One mesh for both engines: an open box (floor and three walls) lit from everywhere.
+VERTICES = [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1],
+            [0.5, 0.5, 0.0], [0.25, 0.75, 0.0]]
+TRIANGLES = [[0, 1, 8], [1, 2, 8], [2, 3, 9], [3, 0, 9], [8, 2, 9], [0, 9, 8],
+             [0, 4, 5], [0, 5, 1], [1, 5, 6], [1, 6, 2], [3, 7, 4], [3, 4, 0]]
+
+SCRIPT = """
+import json, sys
+import numpy as np
+import hemishadow, hemishadow._native, OpenEXR
+from hemishadow.environment import read_exr
+t = hemishadow.transfer(np.array({vertices}, np.float32), np.array({triangles}, np.int32), bands=3)
+print("RESULT " + json.dumps({{"transfer": t.tolist(), "native": hemishadow._native.__file__,
+                              "exr": read_exr(sys.argv[1]).tolist(), "python": sys.version}}))
+"""
+
+
+def tool(name):
+    path = shutil.which(name)
+    if path is None:
+        pytest.skip(f"{name} is missing: scripts/setup_platforms.sh installs it")
+    return path
+
+
+def numpy_wheel(tmp):
+    """numpy's win_amd64 cp313 wheel, the version of this environment, downloaded once."""
+    cache = PLATFORM_DIR / "downloads"
+    cache.mkdir(parents=True, exist_ok=True)
+    pattern = f"numpy-{np.__version__}-cp313-cp313-win_amd64.whl"
+    if not list(cache.glob(pattern)):
+        subprocess.run([sys.executable, "-m", "pip", "download", "-q", "--disable-pip-version-check", "--no-deps",
+                        "--only-binary=:all:", "--python-version", "3.13", "--platform", "win_amd64",
+                        f"numpy=={np.__version__}", "-d", cache], check=True)
+    (wheel,) = cache.glob(pattern)
+    return wheel
+
+
+def stub_dll(dest):
+    gcc = tool(MINGW + "gcc")
+    source = pathlib.Path(__file__).with_name("bcryptprimitives_stub.c")
+    subprocess.run([gcc, "-O2", "-shared", "-o", dest / "bcryptprimitives.dll", source, "-ladvapi32"], check=True)
+
+
+def test_windows_zip_holds_its_wheels():
+    wheels = wheels_in(platform_zip("windows-x64"))
+    assert [w for w in wheels if w.startswith("hemishadow-")] == ["hemishadow-0.1.0-cp311-abi3-win_amd64.whl"]
+    assert sorted(w for w in wheels if w.startswith("openexr-")) == [
+        "openexr-3.4.4-cp311-cp311-win_amd64.whl", "openexr-3.4.4-cp313-cp313-win_amd64.whl"]
+
+
+def test_engine_links_the_stable_abi_dll(tmp_path):
+    objdump = tool(MINGW + "objdump")
+    with zipfile.ZipFile(engine_wheel(platform_zip("windows-x64"), tmp_path)) as archive:
+        archive.extract("hemishadow/_native.pyd", tmp_path)
+    dump = subprocess.run([objdump, "-p", tmp_path / "hemishadow" / "_native.pyd"], capture_output=True,
+                          text=True, check=True).stdout
+    dlls = sorted({line.split(":", 1)[1].strip().lower() for line in dump.splitlines() if "DLL Name:" in line})
+    assert "python3.dll" in dlls, dlls
+    assert not [d for d in dlls if d.startswith("python3") and d != "python3.dll"], dlls
+    # Only system DLLs besides Python: nothing from mingw's runtime that Windows lacks.
+    assert not [d for d in dlls if d.startswith(("libgcc", "libwinpthread", "libstdc++"))], dlls
+    assert "PyInit__native" in dump
+
+
+def test_engine_runs_under_wine(tmp_path):
+    wine = tool("wine")
+    if not (EMBED / "python.exe").is_file():
+        pytest.skip(f"no embeddable Windows CPython in {EMBED}: scripts/setup_platforms.sh unpacks it")
+    zip_path = platform_zip("windows-x64")
+    python = tmp_path / "python"
+    shutil.copytree(EMBED, python)
+    site = python / "site"
+    for wheel in (engine_wheel(zip_path, tmp_path / "wheels"),
+                  extract_member(zip_path, "openexr-3.4.4-cp313-cp313-win_amd64.whl", tmp_path / "wheels"),
+                  numpy_wheel(tmp_path)):
+        with zipfile.ZipFile(wheel) as archive:
+            archive.extractall(site)
+    (python / "python313._pth").write_text("python313.zip\n.\nsite\n")
+    stub_dll(python)
+    exr = tmp_path / "sky.exr"
+    pixels = np.random.default_rng(3).random((4, 8, 3), dtype=np.float32)
+    from hemishadow.environment import write_exr
+    write_exr(exr, {"R": pixels[..., 0], "G": pixels[..., 1], "B": pixels[..., 2]})
+    (tmp_path / "smoke.py").write_text(SCRIPT.format(vertices=VERTICES, triangles=TRIANGLES))
+    prefix = PLATFORM_DIR / "wineprefix"
+    env = dict(os.environ, WINEPREFIX=str(prefix), WINEDEBUG="-all", WINEDLLOVERRIDES="mscoree,mshtml=")
+    result = subprocess.run([wine, python / "python.exe", tmp_path / "smoke.py", exr], capture_output=True,
+                            text=True, env=env, timeout=600)
+    lines = [line for line in result.stdout.splitlines() if line.startswith("RESULT ")]
+    assert result.returncode == 0 and len(lines) == 1, result.stdout[-3000:] + result.stderr[-3000:]
+    facts = json.loads(lines[0][len("RESULT "):])
+    assert facts["python"].startswith("3.13"), facts["python"]
+    assert facts["native"].lower().endswith("_native.pyd"), facts["native"]
+    expected = hemishadow.transfer(np.array(VERTICES, np.float32), np.array(TRIANGLES, np.int32), bands=3)
+    got = np.array(facts["transfer"], np.float32)
+    assert got.shape == expected.shape
+    assert np.abs(got - expected).max() < 1e-5, np.abs(got - expected).max()
+    assert np.array_equal(np.array(facts["exr"], np.float32), pixels)

@@ -1,0 +1,73 @@
+"""pytest plugin of the second tier: the add-on tests run on the extension zip, installed.
+
+    python -m pytest -p installed_extension --extension-zip dist/hemishadow-...zip tests/addon/...
+
+(with tests/tier2 on PYTHONPATH; scripts/run_tests.py does this for each .venv-X.Y). Before
+any test module is imported, the zip is installed into a temporary Blender user folder the
+way a user installs it (`extensions.package_install_files`), which puts the engine and
+OpenEXR wheels for this Blender's Python on sys.path: the environment itself has neither.
+The installed package `bl_ext.user_default.hemishadow` then stands in for `addon`, the name
+the tests import the add-on's source by, and is disabled again so that the tests register
+and unregister it themselves, as they do with the source.
+"""
+
+import importlib
+import os
+import pathlib
+import sys
+import tempfile
+
+import pytest
+
+MODULE = "bl_ext.user_default.hemishadow"
+
+
+def pytest_addoption(parser):
+    parser.addoption("--extension-zip", required=True, help="the extension zip to install and test")
+
+
+def _install(zip_path: pathlib.Path) -> dict:
+    """Install and enable the zip in a fresh user folder; what was installed from where."""
+    user = pathlib.Path(tempfile.mkdtemp(prefix="hemishadow-tier2-"))
+    # Read by bpy when it is imported. The wheels' folder must exist at start-up to come
+    # ahead of other site-packages on sys.path (tests/addon/test_package.py says why).
+    os.environ["BLENDER_USER_RESOURCES"] = str(user)
+    python = f"python{sys.version_info.major}.{sys.version_info.minor}"
+    site = user / "extensions" / ".local" / "lib" / python / "site-packages"
+    site.mkdir(parents=True)
+    if "bpy" in sys.modules:
+        raise pytest.UsageError("bpy was imported before the extension could be installed")
+    import addon_utils
+    import bpy
+
+    bpy.ops.extensions.package_install_files(filepath=str(zip_path), repo="user_default", enable_on_install=True)
+    if tuple(addon_utils.check(MODULE)) != (True, True):
+        raise pytest.UsageError(f"{zip_path.name} did not install and enable {MODULE} in Blender "
+                                f"{bpy.app.version_string} (Python {sys.version.split()[0]})")
+    package = importlib.import_module(MODULE)
+    import hemishadow
+    import OpenEXR
+
+    for module in (hemishadow, OpenEXR):
+        if not pathlib.Path(module.__file__).is_relative_to(site):
+            raise pytest.UsageError(f"{module.__name__} was imported from {module.__file__}, not from {site}")
+    addon_utils.disable(MODULE, default_set=True)
+    return {"package": package, "blender": bpy.app.version_string, "site": site}
+
+
+def pytest_configure(config):
+    zip_path = pathlib.Path(config.getoption("--extension-zip")).resolve()
+    if not zip_path.is_file():
+        raise pytest.UsageError(f"no extension zip at {zip_path}")
+    installed = _install(zip_path)
+    package = installed["package"]
+    for name, module in list(sys.modules.items()):
+        if name == MODULE or name.startswith(MODULE + "."):
+            sys.modules["addon" + name[len(MODULE):]] = module
+    config._hemishadow_installed = (zip_path, installed)
+
+
+def pytest_report_header(config):
+    zip_path, installed = config._hemishadow_installed
+    return (f"second tier: Blender {installed['blender']} (bpy module, Python {sys.version.split()[0]}), "
+            f"the add-on and engine installed from {zip_path.name} into {installed['site']}")
