@@ -8,12 +8,14 @@ way a user installs it (`extensions.package_install_files`), which puts the engi
 OpenEXR wheels for this Blender's Python on sys.path: the environment itself has neither.
 The installed package `bl_ext.user_default.hemishadow` then stands in for `addon`, the name
 the tests import the add-on's source by, and is disabled again so that the tests register
-and unregister it themselves, as they do with the source.
+and unregister it themselves, as they do with the source. (tests/addon/test_world.py loads
+world.py from the source tree by its path; that file is the same as the zip's.)
 """
 
 import importlib
 import os
 import pathlib
+import shutil
 import sys
 import tempfile
 
@@ -37,37 +39,47 @@ def _install(zip_path: pathlib.Path) -> dict:
     site.mkdir(parents=True)
     if "bpy" in sys.modules:
         raise pytest.UsageError("bpy was imported before the extension could be installed")
-    import addon_utils
     import bpy
+    import addon_utils  # comes with bpy
 
     bpy.ops.extensions.package_install_files(filepath=str(zip_path), repo="user_default", enable_on_install=True)
     if tuple(addon_utils.check(MODULE)) != (True, True):
         raise pytest.UsageError(f"{zip_path.name} did not install and enable {MODULE} in Blender "
                                 f"{bpy.app.version_string} (Python {sys.version.split()[0]})")
     package = importlib.import_module(MODULE)
+    # Blender deletes an extension's wheels when no enabled extension needs them, which the
+    # tests' read_factory_settings and unregister cause: the files Blender installed from the
+    # zip for this Python are copied first, and imported from the copy.
+    if "hemishadow" in sys.modules or "OpenEXR" in sys.modules:
+        raise pytest.UsageError("the engine was imported before its wheels could be copied")
+    wheels = sorted(p.name for p in site.glob("*.dist-info"))
+    copy = user / "installed-wheels"
+    shutil.copytree(site, copy)
+    sys.path.insert(0, str(copy))
     import hemishadow
     import OpenEXR
 
     for module in (hemishadow, OpenEXR):
-        if not pathlib.Path(module.__file__).is_relative_to(site):
-            raise pytest.UsageError(f"{module.__name__} was imported from {module.__file__}, not from {site}")
+        if not pathlib.Path(module.__file__).is_relative_to(copy):
+            raise pytest.UsageError(f"{module.__name__} was imported from {module.__file__}, not from {copy}")
     addon_utils.disable(MODULE, default_set=True)
-    return {"package": package, "blender": bpy.app.version_string, "site": site}
+    return {"package": package, "blender": bpy.app.version_string, "wheels": wheels}
 
 
-def pytest_configure(config):
-    zip_path = pathlib.Path(config.getoption("--extension-zip")).resolve()
+@pytest.hookimpl(tryfirst=True)
+def pytest_load_initial_conftests(early_config, parser, args):
+    # Before the conftest files, which import bpy (a `-p` plugin gets this hook).
+    zip_path = pathlib.Path(early_config.known_args_namespace.extension_zip).resolve()
     if not zip_path.is_file():
         raise pytest.UsageError(f"no extension zip at {zip_path}")
     installed = _install(zip_path)
-    package = installed["package"]
     for name, module in list(sys.modules.items()):
         if name == MODULE or name.startswith(MODULE + "."):
             sys.modules["addon" + name[len(MODULE):]] = module
-    config._hemishadow_installed = (zip_path, installed)
+    early_config._hemishadow_installed = (zip_path, installed)
 
 
 def pytest_report_header(config):
     zip_path, installed = config._hemishadow_installed
     return (f"second tier: Blender {installed['blender']} (bpy module, Python {sys.version.split()[0]}), "
-            f"the add-on and engine installed from {zip_path.name} into {installed['site']}")
+            f"installed from {zip_path.name}: {MODULE} and {', '.join(installed['wheels'])}")
