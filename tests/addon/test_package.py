@@ -65,6 +65,12 @@ def operators():
 
 def report(**facts):
     print("RESULT " + json.dumps(facts), flush=True)
+    if bpy.app.version < (5, 0):
+        # The bpy module of 4.2 and 4.5 crashes at interpreter exit once any Python property
+        # callback (update=, items=) or CLI command was registered, even after unregistering
+        # (Blender's own exit path differs): leave without that teardown.
+        sys.stderr.flush()
+        os._exit(0)
 """
 
 
