@@ -57,6 +57,9 @@ PLATFORMS = {
     "windows-x64": {"target": "x86_64-pc-windows-gnu",
                     # python3.dll's import library, made by pyo3 (no Windows Python needed).
                     "maturin": ["--features", "pyo3/generate-import-lib"],
+                    # meshoptimizer's C++ with mingw's libstdc++ linked in, so that the DLL
+                    # needs no libstdc++-6.dll (Windows has none; tests/platforms checks).
+                    "env": {"CXXSTDLIB_x86_64_pc_windows_gnu": "static=stdc++"},
                     "pip": ["win_amd64"]},
     "macos-arm64": {"target": "aarch64-apple-darwin", "maturin": ["--zig"],
                     "pip": ["macosx_11_0_arm64", "macosx_10_15_universal2"]},
@@ -129,7 +132,8 @@ def build_engine_wheel(platform: str) -> pathlib.Path:
         venv = pathlib.Path(sys.prefix)
         # The same environment as scripts/setup.sh's `maturin develop`, so cargo reuses its
         # artifacts instead of rebuilding pyo3 for another interpreter configuration.
-        env = dict(os.environ, VIRTUAL_ENV=str(venv), PATH=f"{venv / 'bin'}{os.pathsep}{os.environ.get('PATH', '')}")
+        env = dict(os.environ, VIRTUAL_ENV=str(venv), PATH=f"{venv / 'bin'}{os.pathsep}{os.environ.get('PATH', '')}",
+                   **spec.get("env", {}))
         maturin = shutil.which("maturin", path=env["PATH"]) or "maturin"
         command = [maturin, "build", "--release", "--out", tmp, *spec["maturin"]]
         if spec["target"]:

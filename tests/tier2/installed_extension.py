@@ -73,6 +73,7 @@ def pytest_load_initial_conftests(early_config, parser, args):
     if not zip_path.is_file():
         raise pytest.UsageError(f"no extension zip at {zip_path}")
     installed = _install(zip_path)
+    os.environ["HEMISHADOW_TEST_ZIP"] = str(zip_path)  # tests/addon/test_package.py installs it too
     for name, module in list(sys.modules.items()):
         if name == MODULE or name.startswith(MODULE + "."):
             sys.modules["addon" + name[len(MODULE):]] = module
