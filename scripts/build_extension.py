@@ -55,11 +55,12 @@ PYTHON_VERSIONS = ("3.11", "3.13")
 PLATFORMS = {
     "linux-x64": {"target": None, "maturin": [], "pip": ["manylinux2014_x86_64"]},
     "windows-x64": {"target": "x86_64-pc-windows-gnu",
-                    # python3.dll's import library, made by pyo3 (no Windows Python needed).
-                    "maturin": ["--features", "pyo3/generate-import-lib"],
+                    # python3.dll's import library, made by pyo3 (no Windows Python needed);
+                    # one interpreter named, or maturin also builds PyPy and 3.13t wheels.
+                    "maturin": ["--features", "pyo3/generate-import-lib", "--interpreter", "python3.11"],
                     # meshoptimizer's C++ with mingw's libstdc++ linked in, so that the DLL
                     # needs no libstdc++-6.dll (Windows has none; tests/platforms checks).
-                    "env": {"CXXSTDLIB_x86_64_pc_windows_gnu": "static=stdc++"},
+                    "env": {"CXXSTDLIB_STATIC_x86_64_pc_windows_gnu": "1"},
                     "pip": ["win_amd64"]},
     "macos-arm64": {"target": "aarch64-apple-darwin", "maturin": ["--zig"],
                     "pip": ["macosx_11_0_arm64", "macosx_10_15_universal2"]},

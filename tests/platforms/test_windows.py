@@ -1,6 +1,6 @@
 """The Windows x64 zip: its engine imports and computes under Wine, in the official embeddable
 Windows CPython 3.13 (scripts/setup_platforms.sh unpacks it into build/platforms/), with numpy's
-win_amd64 wheel, and gives the linux engine's numbers; OpenEXR's cp313 wheel from the zip reads
+win_amd64 wheel (2.1.3: see WINE_NUMPY), and gives the linux engine's numbers; OpenEXR's cp313 wheel from the zip reads
 an EXR written here. Wine 8 lacks bcryptprimitives.dll (Windows 10 and later have it), so a
 tiny mingw-built stand-in (bcryptprimitives_stub.c) is put beside python.exe for this test.
 Also checked statically: the engine links python3.dll (the stable ABI), not python313.dll."""
@@ -23,6 +23,9 @@ hemishadow = pytest.importorskip("hemishadow")
 PLATFORM_DIR = ROOT / "build" / "platforms"
 EMBED = PLATFORM_DIR / "python-3.13.0"
 MINGW = "x86_64-w64-mingw32-"
+# numpy 2.2 and later call ucrtbase's crealf, which Wine 8 does not implement (the import
+# aborts); 2.1.3 is the newest that imports under Wine 8 (Blender 5.3 ships numpy 2.x too).
+WINE_NUMPY = "2.1.3"
 
 # One mesh for both engines: an open box (floor and three walls) lit from everywhere.
 VERTICES = [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1],
@@ -49,14 +52,14 @@ def tool(name):
 
 
 def numpy_wheel(tmp):
-    """numpy's win_amd64 cp313 wheel, the version of this environment, downloaded once."""
+    """numpy's win_amd64 cp313 wheel, downloaded once."""
     cache = PLATFORM_DIR / "downloads"
     cache.mkdir(parents=True, exist_ok=True)
-    pattern = f"numpy-{np.__version__}-cp313-cp313-win_amd64.whl"
+    pattern = f"numpy-{WINE_NUMPY}-cp313-cp313-win_amd64.whl"
     if not list(cache.glob(pattern)):
         subprocess.run([sys.executable, "-m", "pip", "download", "-q", "--disable-pip-version-check", "--no-deps",
                         "--only-binary=:all:", "--python-version", "3.13", "--platform", "win_amd64",
-                        f"numpy=={np.__version__}", "-d", cache], check=True)
+                        f"numpy=={WINE_NUMPY}", "-d", cache], check=True)
     (wheel,) = cache.glob(pattern)
     return wheel
 
