@@ -62,9 +62,12 @@ PLATFORMS = {
                     # needs no libstdc++-6.dll (Windows has none; tests/platforms checks).
                     "env": {"CXXSTDLIB_STATIC_x86_64_pc_windows_gnu": "1"},
                     "pip": ["win_amd64"]},
+    # macOS 11 as the oldest: what Blender 4.2 needs (11.2); zig's default would be 13.
     "macos-arm64": {"target": "aarch64-apple-darwin", "maturin": ["--zig"],
+                    "env": {"MACOSX_DEPLOYMENT_TARGET": "11.0"},
                     "pip": ["macosx_11_0_arm64", "macosx_10_15_universal2"]},
     "macos-x64": {"target": "x86_64-apple-darwin", "maturin": ["--zig"],
+                  "env": {"MACOSX_DEPLOYMENT_TARGET": "11.0"},
                   "pip": ["macosx_10_15_x86_64", "macosx_10_9_x86_64", "macosx_10_15_universal2"]},
 }
 HOST_PLATFORM = "linux-x64"
