@@ -62,12 +62,16 @@ PLATFORMS = {
                     # needs no libstdc++-6.dll (Windows has none; tests/platforms checks).
                     "env": {"CXXSTDLIB_STATIC_x86_64_pc_windows_gnu": "1"},
                     "pip": ["win_amd64"]},
-    # macOS 11 as the oldest: what Blender 4.2 needs (11.2); zig's default would be 13.
+    # macOS 11 as the oldest: what Blender 4.2 needs (11.2). MACOSX_DEPLOYMENT_TARGET tags the
+    # wheel, but maturin's zig wrapper links for `-target <arch>-macos-none` (zig's default,
+    # macOS 13): a later versioned -target, passed as link arguments, wins.
     "macos-arm64": {"target": "aarch64-apple-darwin", "maturin": ["--zig"],
-                    "env": {"MACOSX_DEPLOYMENT_TARGET": "11.0"},
+                    "env": {"MACOSX_DEPLOYMENT_TARGET": "11.0", "CARGO_TARGET_AARCH64_APPLE_DARWIN_RUSTFLAGS":
+                            "-C link-arg=-target -C link-arg=aarch64-macos.11.0-none"},
                     "pip": ["macosx_11_0_arm64", "macosx_10_15_universal2"]},
     "macos-x64": {"target": "x86_64-apple-darwin", "maturin": ["--zig"],
-                  "env": {"MACOSX_DEPLOYMENT_TARGET": "11.0"},
+                  "env": {"MACOSX_DEPLOYMENT_TARGET": "11.0", "CARGO_TARGET_X86_64_APPLE_DARWIN_RUSTFLAGS":
+                          "-C link-arg=-target -C link-arg=x86_64-macos.11.0-none"},
                   "pip": ["macosx_10_15_x86_64", "macosx_10_9_x86_64", "macosx_10_15_universal2"]},
 }
 HOST_PLATFORM = "linux-x64"
