@@ -2,12 +2,18 @@
 
 Registered with `bpy.utils.register_cli_command("hemishadow", main)`; Blender calls
 `main(argv)` with the arguments after the command id and exits with its return value:
-0 on success, 1 when the work failed, 2 for a bad command line (as argparse does).
+0 on success, 1 when the work failed, 2 for a bad command line (as argparse does), 130 when
+cancelled with Ctrl-C (nothing saved).
+
+Progress goes to stderr as in the engine's own command line (`hemishadow.cli.ProgressBar`): a
+bar redrawn in place on a terminal, a line per 10 % otherwise; `compute` shows the engine's
+progress through the vertices, `bake` the frames (and the vertices within them).
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import sys
 import time
 
@@ -41,7 +47,8 @@ def build_parser() -> argparse.ArgumentParser:
         "  ... bake --start 1 --end 120               (caches in //hemishadow_cache/)\n"
         "  ... bake --pack                            (caches inside the .blend, saved)\n"
         "  ... bake --help\n"
-        "exit codes: 0 done, 1 the work failed, 2 bad command line"))
+        "progress goes to stderr; Ctrl-C cancels and saves nothing\n"
+        "exit codes: 0 done, 1 the work failed, 2 bad command line, 130 cancelled"))
     commands = parser.add_subparsers(dest="command", metavar="{compute,bake}", parser_class=_Parser)
 
     compute = commands.add_parser("compute", help="compute one frame into the attributes",
@@ -82,11 +89,16 @@ def main(argv) -> int:
         scene = _scene(args.scene)
         objects = _objects(scene, args.objects)
         run = _compute if args.command == "compute" else _bake
-        run(scene, objects, args)
+        if not run(scene, objects, args):
+            print("hemishadow: cancelled (Ctrl-C): nothing saved", file=sys.stderr)
+            return 130
         if args.save or getattr(args, "pack", False):
             _save()
     except SystemExit as stop:          # --help, --version
         return int(stop.code or 0)
+    except KeyboardInterrupt:           # Ctrl-C outside the engine's work
+        print("hemishadow: cancelled (Ctrl-C): nothing saved", file=sys.stderr)
+        return 130
     except UsageError as error:
         print(error, file=sys.stderr)
         return 2
@@ -123,7 +135,36 @@ def _objects(scene, names):
     return objects
 
 
-def _compute(scene, objects, args):
+def _progress_bar(label):
+    from hemishadow.cli import ProgressBar, cancel_on_ctrl_c
+
+    bar = ProgressBar(label)
+    return bar, cancel_on_ctrl_c(bar.interrupted)
+
+
+@contextlib.contextmanager
+def _engine_progress(callback):
+    """The live path (engine_bridge) solves without a progress callback: for the command's
+    duration, every TransferSolver.solve that gets none gets `callback`. Background mode
+    computes on this thread only, so nothing else sees it."""
+    import hemishadow
+
+    solve = hemishadow.TransferSolver.solve
+
+    def solve_with_progress(self, *args, progress=None, **kwargs):
+        return solve(self, *args, progress=progress or callback, **kwargs)
+
+    hemishadow.TransferSolver.solve = solve_with_progress
+    try:
+        yield
+    finally:
+        hemishadow.TransferSolver.solve = solve
+
+
+def _compute(scene, objects, args) -> bool:
+    """Returns False when cancelled."""
+    import hemishadow
+
     from . import cache, engine_bridge
 
     frame = scene.frame_current if args.frame is None else args.frame
@@ -132,7 +173,17 @@ def _compute(scene, objects, args):
         scene.frame_set(frame)
     depsgraph = bpy.context.evaluated_depsgraph_get()
     engine_bridge.last_timings.clear()
-    errors = engine_bridge.update_scene(scene, depsgraph, objects, force=True)
+    bar, interrupts = _progress_bar("compute")
+    with interrupts, _engine_progress(bar):
+        try:
+            bar(0.0)
+            errors = engine_bridge.update_scene(scene, depsgraph, objects, force=True)
+        except hemishadow.Cancelled:
+            return False
+        finally:
+            bar.close()
+    if bar.interrupted.is_set():
+        return False
     for obj in objects:
         if obj.name in errors:
             continue
@@ -142,9 +193,11 @@ def _compute(scene, objects, args):
     if errors:
         raise RuntimeError("; ".join(f"{name}: {message}" for name, message in errors.items()))
     print(f"hemishadow: computed {len(objects)} object(s) in {(time.perf_counter() - t0):.2f} s")
+    return True
 
 
-def _bake(scene, objects, args):
+def _bake(scene, objects, args) -> bool:
+    """Returns False when cancelled."""
     from .operators.bake import bake_range
 
     start = scene.frame_start if args.start is None else args.start
@@ -152,20 +205,22 @@ def _bake(scene, objects, args):
     if end < start:
         raise UsageError(f"{PROG}: error: --end {end} is before --start {start}")
     count = end - start + 1
-    step = max(1, count // 10)
-
-    def progress(done, total):
-        if done % step == 0 or done == total:
-            print(f"hemishadow: baked {done}/{total} frames", flush=True)
-
+    bar, interrupts = _progress_bar("bake")
     t0 = time.perf_counter()
-    result = bake_range(scene, objects, start, end, progress=progress,
-                        location="PACKED" if args.pack else "FILE", directory=args.cache_dir,
-                        store_transfer=not args.no_transfer)
+    with interrupts:
+        try:
+            result = bake_range(scene, objects, start, end, fraction=bar, cancel=bar.interrupted,
+                                location="PACKED" if args.pack else "FILE", directory=args.cache_dir,
+                                store_transfer=not args.no_transfer)
+        finally:
+            bar.close()
+    if result.cancelled:
+        return False
     for name, where in result.saved.items():
         print(f"hemishadow: {name}: frames {start}..{end} -> {where}")
     print(f"hemishadow: baked {count} frames of {len(objects)} object(s) in {time.perf_counter() - t0:.2f} s "
           f"(engine {result.engine_seconds:.2f} s, Blender {result.blender_seconds:.2f} s)")
+    return True
 
 
 def _save():

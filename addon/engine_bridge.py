@@ -10,8 +10,10 @@ Time is split into Blender I/O (reading the evaluated mesh, writing attributes) 
 time (transfer, shading), per object, in `last_timings`.
 """
 
+import itertools
+import threading
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -24,6 +26,8 @@ class _Entry:
     solver: object
     fingerprint: int | None = None  # hash of the positions (and view) `transfer` was computed on
     transfer: np.ndarray | None = None
+    written: int = -1  # Request.serial of `transfer`: an older request's result is never written over it
+    lock: threading.Lock = field(default_factory=threading.Lock)  # one thread at a time per solver
 
 
 @dataclass
@@ -37,6 +41,8 @@ class Result:
 
 # Keyed by ID.session_uid: stable while the object lives, unlike its name.
 _entries: dict[int, _Entry] = {}
+#: World-space positions the last transfer was computed on (lamps light each vertex from there).
+_positions: dict[int, np.ndarray] = {}
 #: object name -> (vertex count, Blender I/O seconds, engine seconds) of its last computation.
 last_timings: dict[str, tuple[int, float, float]] = {}
 
@@ -80,10 +86,30 @@ def _view_directions(obj, scene, vertices):
     return view
 
 
-def compute_object(obj, depsgraph, scene, *, force=False, lighting=None):
-    """Transfer, AO and radiance of the object's evaluated mesh, as a Result; None when the
-    positions (and view) are those of the last computation and `force` is false.
-    Raises mesh_io.SkipObject, or the engine's ValueError / RuntimeError."""
+@dataclass(eq=False)
+class Request:
+    """One object's solver inputs, read on the main thread. It holds no Blender data, so any
+    thread may solve it (jobs.py does, in a worker)."""
+
+    uid: int
+    entry: _Entry
+    vertices: np.ndarray
+    normals: np.ndarray | None
+    view: np.ndarray | None
+    fingerprint: int
+    io_seconds: float
+    serial: int  # order of reading: a later read has newer positions
+    solve_seconds: float = 0.0  # set by solve_object
+
+
+#: ID.session_uid -> seconds of the object's last solve (jobs.py tells heavy objects by it).
+solve_seconds: dict[int, float] = {}
+_serials = itertools.count()
+
+
+def read_object(obj, depsgraph, scene, *, force=False):
+    """Main thread: the Request for the object's evaluated mesh; None when the positions (and
+    view) are those of the last computation and `force` is false. Raises mesh_io.SkipObject."""
     t0 = time.perf_counter()
     vertices, triangles, normals = mesh_io.read_evaluated(obj, depsgraph)
     view = _view_directions(obj, scene, vertices)
@@ -92,21 +118,81 @@ def compute_object(obj, depsgraph, scene, *, force=False, lighting=None):
     fingerprint = hash((vertices.tobytes(), None if view is None else view.tobytes()))
     written = mesh_io.RADIANCE in obj.data.attributes  # gone after Clear, or undone
     if not force and written and entry.transfer is not None and entry.fingerprint == fingerprint:
+        entry.written = next(_serials)  # still current: results of requests read before this one are older
         return None
-    entry.transfer, entry.fingerprint = None, None  # never keep a stale pair if solve raises
-    transfer = entry.solver.solve(vertices, normals, view)
-    entry.transfer, entry.fingerprint = transfer, fingerprint
-    result = _shade(obj, scene, transfer, lighting)
-    result.io_seconds, result.engine_seconds = t1 - t0, time.perf_counter() - t1
+    return Request(obj.session_uid, entry, vertices, normals, view, fingerprint, t1 - t0, next(_serials))
+
+
+def solve_object(request, progress=None):
+    """Any thread, no Blender data: the transfer vectors of a Request. `progress` as the
+    engine's (returning False raises hemishadow.Cancelled)."""
+    with request.entry.lock:
+        t0 = time.perf_counter()
+        transfer = request.entry.solver.solve(request.vertices, request.normals, request.view, progress=progress)
+        request.solve_seconds = seconds = time.perf_counter() - t0
+    # The engine answers a repeated solve of the same positions from a cache in no time:
+    # decay rather than forget, so a heavy object does not pass for light after one.
+    solve_seconds[request.uid] = max(seconds, solve_seconds.get(request.uid, 0.0) / 2)
+    return transfer
+
+
+def _shade_request(obj, scene, request, transfer, lighting):
+    t0 = time.perf_counter()
+    entry = request.entry
+    entry.transfer, entry.fingerprint, entry.written = transfer, request.fingerprint, request.serial
+    result = _shade(obj, scene, transfer, lighting, request.vertices)
+    result.io_seconds = request.io_seconds
+    result.engine_seconds = request.solve_seconds + time.perf_counter() - t0
     return result
 
 
-def _shade(obj, scene, transfer, lighting=None):
+def compute_object(obj, depsgraph, scene, *, force=False, lighting=None):
+    """Transfer, AO and radiance of the object's evaluated mesh, as a Result; None when the
+    positions (and view) are those of the last computation and `force` is false.
+    Raises mesh_io.SkipObject, or the engine's ValueError / RuntimeError."""
+    request = read_object(obj, depsgraph, scene, force=force)
+    if request is None:
+        return None
+    request.entry.transfer, request.entry.fingerprint = None, None  # never keep a stale pair if solve raises
+    return _shade_request(obj, scene, request, solve_object(request), lighting)
+
+
+def obsolete(request):
+    """True when a Request's result must not be written: the object's solver changed, or the
+    result of a request read later has been written (or found current) already."""
+    entry = request.entry
+    return _entries.get(request.uid) is not entry or entry.written > request.serial
+
+
+def finish_object(obj, scene, request, transfer, lighting=None):
+    """Main thread: shade and write a transfer that solve_object computed elsewhere; returns
+    the Result, or None when it is obsolete: the object's solver changed meanwhile, or a
+    request read later has been written already. Errors are raised as by update_object, the
+    status line is set either way."""
+    if obsolete(request):
+        return None
+    try:
+        mesh_io.check_computable(obj)
+        result = _shade_request(obj, scene, request, transfer, lighting)
+    except (ValueError, RuntimeError) as error:
+        set_status(obj, str(error))
+        raise
+    _publish(obj, result)
+    return result
+
+
+def _shade(obj, scene, transfer, lighting=None, vertices=None):
+    """Environment and suns (`lighting`, default the scene's) plus the lamps at `vertices`
+    (default: the positions of the object's last computation)."""
     import hemishadow
+
+    from . import lighting as scene_lights
 
     if lighting is None:
         lighting = scene_lighting(scene, obj.hemishadow.band_count)
-    radiance = hemishadow.shade(transfer, lighting, _albedo(obj))
+    if vertices is not None:
+        _positions[obj.session_uid] = vertices
+    radiance = scene_lights.shade(scene, transfer, lighting, _albedo(obj), _positions.get(obj.session_uid))
     return Result(transfer, hemishadow.ambient_occlusion(transfer), radiance)
 
 
@@ -135,10 +221,14 @@ def update_object(obj, depsgraph, scene, *, force=False, lighting=None):
         raise
     if result is None:
         return None
+    _publish(obj, result)
+    return result
+
+
+def _publish(obj, result):
     result.io_seconds += _write(obj, result)
     last_timings[obj.name] = (len(result.ao), result.io_seconds, result.engine_seconds)
     set_status(obj, f"{len(result.ao)} vertices, AO {float(result.ao.min()):.2f}..{float(result.ao.max()):.2f}")
-    return result
 
 
 def enabled_objects(scene):
@@ -177,12 +267,17 @@ def reshade_object(obj, scene, lighting=None):
     return True
 
 
-def reshade_scene(scene):
-    """Re-shade every object of the scene that has transfer vectors; errors go to the status."""
-    for obj in scene.objects:
+def reshade_scene(scene, objects=None):
+    """Re-shade every object of the scene (or of `objects`) that has transfer vectors; errors
+    go to the status."""
+    lighting = {}
+    for obj in scene.objects if objects is None else objects:
         if obj.session_uid in _entries:
             try:
-                reshade_object(obj, scene)
+                bands = obj.hemishadow.band_count
+                if bands not in lighting:
+                    lighting[bands] = scene_lighting(scene, bands)
+                reshade_object(obj, scene, lighting[bands])
             except (ValueError, RuntimeError) as error:
                 set_status(obj, str(error))
 
@@ -191,8 +286,10 @@ def forget(obj=None):
     """Drop the solver and transfer of one object (all when None)."""
     if obj is None:
         _entries.clear()
+        _positions.clear()
     else:
         _entries.pop(obj.session_uid, None)
+        _positions.pop(obj.session_uid, None)
 
 
 def forget_positions():
@@ -209,6 +306,7 @@ def prune():
     alive = {o.session_uid for o in bpy.data.objects}
     for uid in [u for u in _entries if u not in alive]:
         del _entries[uid]
+        _positions.pop(uid, None)
 
 
 def has_transfer(obj):

@@ -2,7 +2,7 @@
 
 import bpy
 
-from . import engine_bridge
+from . import cache, engine_bridge, jobs
 
 
 class _Sidebar:
@@ -27,6 +27,9 @@ def draw_object_settings(layout, obj):
     outputs.prop(settings, "write_sh")
     if settings.status:
         column.label(text=settings.status, icon="INFO")
+    cache.draw_status(column, obj)
+    if jobs.pending([obj]):
+        column.operator("hemishadow.cancel_jobs", icon="CANCEL")
     timing = engine_bridge.last_timings.get(obj.name)
     if timing:
         column.label(text=f"{timing[0]} vertices: engine {timing[2] * 1e3:.0f} ms, Blender I/O {timing[1] * 1e3:.0f} ms")
@@ -50,6 +53,9 @@ class HEMISHADOW_PT_lighting(_Sidebar, bpy.types.Panel):
         from . import world
 
         layout.label(text=world.lighting_source(context.scene).label, icon="WORLD")
+        for message in world.notes(context.scene):
+            layout.label(text=message, icon="ERROR")
+        layout.operator("hemishadow.precompute_world", icon="WORLD")
 
 
 class HEMISHADOW_PT_object(_Sidebar, bpy.types.Panel):

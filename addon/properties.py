@@ -2,16 +2,17 @@
 
 What `world.scene_lighting(scene, bands)` reads from `scene.hemishadow`
 (a `HemishadowSceneSettings`):
-- `lighting_source`: 'WORLD' (the World's Environment Texture, its Mapping node rotation and
-  Background strength; falls back to `hdri` when the World has none), 'BUILTIN' (the HDRI
-  named by `hdri`) or 'UNIFORM' (a uniform sky of radiance 1).
+- `lighting_source`: 'WORLD' (what the World emits, for any node setup: an Environment Texture
+  and a plain colour directly, anything else through a small Cycles render; `hdri` only when
+  the scene has no World), 'BUILTIN' (the HDRI named by `hdri`) or 'UNIFORM' (a uniform sky).
 - `hdri`: name of one of the HDRIs that ship with Blender
   (`hemishadow.environment.builtin_hdris()` keys, e.g. 'forest').
 - `uniform_color`: radiance of the uniform sky (RGB).
 - `intensity`: scale of the lighting radiance (>= 0).
 - `rotation`: rotation of the lighting about world +Z in radians, applied after the
   World's own Mapping rotation.
-- `use_sun_lamps`: add the scene's sun lamps as soft SH lobes.
+- `use_sun_lamps`: add the scene's sun lamps as soft SH lobes (point, spot and area lamps
+  are always added, per vertex: lamps.py).
 Changing any of these re-shades the objects from their last transfer vectors
 (`engine_bridge.reshade_scene`), without recomputing transfer.
 
@@ -39,6 +40,10 @@ def _live_changed(self, context):
         from . import engine_bridge
 
         engine_bridge.update_scene(context.scene, context.evaluated_depsgraph_get())
+    else:
+        from . import jobs
+
+        jobs.cancel()  # heavy objects computing in the background stop, keeping their (stale) result
 
 
 # Enum items built by a callback must stay referenced, or Blender shows garbage names.
@@ -64,11 +69,11 @@ class HemishadowSceneSettings(bpy.types.PropertyGroup):
         description="Recompute self-shadowing of enabled objects on every frame change and deformation")
     lighting_source: EnumProperty(
         name="Lighting", default="WORLD", update=_lighting_changed,
-        items=[("WORLD", "World", "The World's Environment Texture (falls back to the built-in HDRI)"),
+        items=[("WORLD", "World", "What the World emits, any node setup (the built-in HDRI only without a World)"),
                ("BUILTIN", "Built-in HDRI", "One of the HDRIs that ship with Blender"),
                ("UNIFORM", "Uniform Sky", "Constant radiance 1 from every direction")])
     hdri: EnumProperty(name="HDRI", items=_hdri_enum, update=_lighting_changed,
-                       description="Built-in HDRI, used by 'Built-in HDRI' and when the World has no Environment Texture")
+                       description="Built-in HDRI, used by 'Built-in HDRI' and when the scene has no World")
     uniform_color: FloatVectorProperty(name="Sky Color", subtype="COLOR", size=3, default=(1.0, 1.0, 1.0), min=0.0,
                                        update=_lighting_changed, description="Radiance of the uniform sky")
     intensity: FloatProperty(name="Intensity", default=1.0, min=0.0, soft_max=10.0, update=_lighting_changed,

@@ -1,4 +1,4 @@
-"""World / Environment Texture / sun lamps -> lighting SH.
+"""World / Environment Texture / sun lamps -> lighting SH (uniform over the object).
 
 `scene_lighting(scene, bands)` gives the SH coefficients (bands*bands, 3) of the radiance
 arriving at the scene, in the project's conventions (Blender world space, +Z up; real
@@ -8,8 +8,19 @@ vector T is T . L, as `hemishadow.shade` computes it.
 The projection of an environment image is the expensive part (about 0.1 s for a 1k map), so it
 is cached per image (file path and modification time, or name, size and pixels), rotation and
 band count; intensity, the extra rotation and sun lamps are applied on top, so changing those
-re-shades at once. This module never imports the add-on's other modules: the tests load it on
-its own.
+re-shades at once.
+
+Which World setups take which path (`lighting_source`):
+- an Environment Texture (through Mapping rotations only) straight into the Background that
+  feeds the World Output: projected from the image itself ('WORLD', the fast path);
+- a Background with a plain colour and strength: a uniform sky, exactly ('WORLD_COLOR');
+- anything else (Sky Texture, gradients, mixes, groups, Light Path tricks, Mapping location or
+  scale, linked strength, animation): Cycles renders the World and that is projected
+  ('WORLD_RENDER', world_render.py). Inside handlers nothing is rendered: a missing
+  projection is scheduled for a timer, the nearest one there is stands in meanwhile, and
+  `notes(scene)` says so;
+- no World at all: the built-in HDRI, and `notes(scene)` says so.
+Point, spot and area lamps vary over the object: lamps.py.
 """
 
 from __future__ import annotations
@@ -23,7 +34,9 @@ import os
 import bpy
 import numpy as np
 
-__all__ = ["LightingSource", "lighting_source", "scene_lighting", "sun_lobe", "clear_cache"]
+from . import evaluated, lamps, world_render
+
+__all__ = ["LightingSource", "lighting_source", "scene_lighting", "sun_lobe", "clear_cache", "notes"]
 
 # Defaults for the scene settings (`scene.hemishadow`, defined in properties.py) when they
 # are not registered; the same values as the properties' defaults.
@@ -44,7 +57,8 @@ _cache: collections.OrderedDict = collections.OrderedDict()
 class LightingSource:
     """Where the environment part of the lighting comes from.
 
-    kind: 'WORLD' (the World's Environment Texture), 'BUILTIN' (a built-in HDRI) or 'UNIFORM'.
+    kind: 'WORLD' (the World's Environment Texture), 'WORLD_COLOR' (its plain Background colour),
+    'WORLD_RENDER' (the World rendered by Cycles), 'BUILTIN' (a built-in HDRI) or 'UNIFORM'.
     label: one line for the user interface, e.g. "World: forest.exr, strength 1.0".
     image: the bpy Image (WORLD) or None; path: the EXR path read directly, or None when the
     image's pixels are used (packed, generated, not EXR).
@@ -59,11 +73,24 @@ class LightingSource:
     path: str | None = None
     rotation: np.ndarray = dataclasses.field(default_factory=lambda: np.eye(3))
     scale: np.ndarray = dataclasses.field(default_factory=lambda: np.ones(3))
+    world: object = None
+    note: str = ""  # something the user must know (fallback, pending render), else ""
+
+
+#: scene name -> what the last `scene_lighting` had to tell (see `notes`).
+_notes: dict[str, list[str]] = {}
 
 
 def clear_cache() -> None:
     """Forget every cached projection (the next `scene_lighting` projects again)."""
     _cache.clear()
+    world_render.clear()
+
+
+def notes(scene) -> list[str]:
+    """Messages about the scene's lighting for the status bar and operator reports: a
+    fallback, a World not rendered yet, lamp features that are not represented."""
+    return list(_notes.get(scene.name, [])) + lamps.unsupported(scene)
 
 
 def _settings_value(settings, name):
@@ -73,10 +100,11 @@ def _settings_value(settings, name):
 def scene_lighting(scene, bands=5, settings=None) -> np.ndarray:
     """Lighting SH of the scene: float32 (bands*bands, 3), radiance coefficients.
 
-    Environment (radiance, per `lighting_source`): the World's Environment Texture when one
-    feeds the World output's Background (its Mapping node rotation and Background strength
-    honoured), else the built-in HDRI named by `hdri`, else a uniform sky of radiance
-    `uniform_color` (band 0 only: L_00 = sqrt(4 pi) c, so an open surface gets irradiance pi c).
+    Environment (radiance, per `lighting_source`): what the World emits (see the module notes:
+    an Environment Texture or a plain colour directly, any other node setup through a Cycles
+    render), the built-in HDRI named by `hdri` when there is no World or when asked, else a
+    uniform sky of radiance `uniform_color` (band 0 only: L_00 = sqrt(4 pi) c, so an open
+    surface gets irradiance pi c). What the user must know about it goes to `notes(scene)`.
     The environment is scaled by `intensity` and rotated by `rotation` radians about +Z
     (counter-clockwise seen from above: what lit +X then lights cos(r) X + sin(r) Y).
 
@@ -92,9 +120,13 @@ def scene_lighting(scene, bands=5, settings=None) -> np.ndarray:
     if settings is None:
         settings = getattr(scene, "hemishadow", None)
     source = lighting_source(scene, settings)
-    if source.kind == "UNIFORM":
+    if source.kind in ("UNIFORM", "WORLD_COLOR"):
         lighting = np.zeros((bands * bands, 3), np.float64)
         lighting[0] = math.sqrt(4 * math.pi) * source.scale
+    elif source.kind == "WORLD_RENDER":
+        lighting, note = _rendered(scene, source.world, bands)
+        if note:
+            source.note = note
     else:
         lighting = _projection(source, bands).astype(np.float64) * source.scale
     lighting *= float(_settings_value(settings, "intensity"))
@@ -102,14 +134,46 @@ def scene_lighting(scene, bands=5, settings=None) -> np.ndarray:
     if angle:
         lighting = hemishadow.rotate_sh(lighting, hemishadow.rotation_matrix((0, 0, 1), angle)).astype(np.float64)
     if _settings_value(settings, "use_sun_lamps"):
-        for obj in _sun_lamps(scene):
+        for obj in lamps.visible_lamps(scene, ("SUN",)):
             direction = np.array(obj.matrix_world.to_3x3().col[2], np.float64)
             if not np.linalg.norm(direction) > 0:
                 continue
-            light = obj.data
-            lighting += sun_lobe(direction, float(light.energy) * np.array(light.color, np.float64),
-                                 float(light.angle), bands)
+            lighting += sun_lobe(direction, lamps.lamp_power_color(obj.data), float(obj.data.angle), bands)
+    _notes[scene.name] = [source.note] if source.note else []
     return np.ascontiguousarray(lighting, dtype=np.float32)
+
+
+def _rendered(scene, world, bands):
+    """(the World's rendered projection at this frame, note): rendered now when allowed, else
+    scheduled for a timer with the nearest projection (or darkness) meanwhile."""
+    frame = scene.frame_current
+    world = world.original
+    found = world_render.cached(world, frame)
+    if found is not None:
+        return found[: bands * bands], ""
+    if world_render.can_render():
+        try:
+            return world_render.render_projection(world, frame)[: bands * bands], ""
+        except (RuntimeError, ValueError, OSError) as error:
+            note = f"World {world.name!r} could not be rendered for lighting: {error}"
+    else:
+        world_render.schedule(scene, _projection_ready)
+        animated = " (animated World: use Precompute World Lighting before rendering)" \
+            if world_render.is_animated(world) else ""
+        note = f"World {world.name!r} not rendered for frame {frame} yet{animated}"
+    found = world_render.nearest(world, frame)
+    if found is None:
+        return np.zeros((bands * bands, 3)), note + ": no World light meanwhile"
+    return found[: bands * bands], note + ": its nearest projection meanwhile"
+
+
+def _projection_ready(scene, remaining):
+    """Timer callback: a new World projection is cached; re-shade the live objects with it."""
+    from . import handlers
+
+    handlers.reshade_live(scene)
+    if remaining:
+        print(f"hemishadow: World lighting: {remaining} frames left to render")
 
 
 def lighting_source(scene, settings=None) -> LightingSource:
@@ -119,18 +183,22 @@ def lighting_source(scene, settings=None) -> LightingSource:
     kind = _settings_value(settings, "lighting_source")
     fallback_note = ""
     if kind == "WORLD":
-        found, why = _world_environment(scene.world)
-        if found is not None:
-            return found
-        fallback_note = f" ({why})"
+        if scene.world is not None:
+            return _world_source(evaluated.of(scene.world))
+        fallback_note = " (no World)"
     if kind in ("WORLD", "BUILTIN"):
         builtin = _builtin_source(_settings_value(settings, "hdri"))
         if builtin is not None:
             builtin.label += fallback_note
+            if fallback_note:
+                builtin.note = f"the scene has no World: lit by the built-in HDRI '{os.path.basename(builtin.path)}'"
             return builtin
-        fallback_note = " (no built-in HDRI found)"
+        fallback_note += " (no built-in HDRI found)"
     color = np.array(_settings_value(settings, "uniform_color"), np.float64)
-    return LightingSource("UNIFORM", f"Uniform sky{fallback_note}", scale=color)
+    source = LightingSource("UNIFORM", f"Uniform sky{fallback_note}", scale=color)
+    if fallback_note:
+        source.note = f"lit by a uniform sky{fallback_note}"
+    return source
 
 
 def sun_lobe(direction, irradiance, angle, bands=5) -> np.ndarray:
@@ -218,21 +286,6 @@ def _world_output(tree):
     return outputs[0] if outputs else None
 
 
-def _find_background(node, depth=0):
-    """The first Background shader reachable from `node` (through Mix and Add Shader nodes)."""
-    if node is None or depth > 16:
-        return None
-    if node.type == "BACKGROUND":
-        return node
-    if node.type in ("MIX_SHADER", "ADD_SHADER"):
-        for socket in node.inputs:
-            if socket.type == "SHADER":
-                found = _find_background(_upstream(socket), depth + 1)
-                if found is not None:
-                    return found
-    return None
-
-
 def _mapping_rotation(env):
     """Rotation the env node's lookup vector goes through: chained Mapping nodes composed."""
     import hemishadow
@@ -249,57 +302,84 @@ def _mapping_rotation(env):
         if kind == "TEXTURE":  # the inverse transform
             rotation = rotation.T
         if node.inputs["Rotation"].is_linked:
-            notes.append("linked rotation ignored")
+            notes.append("linked rotation")
         if kind in ("POINT", "TEXTURE"):
             location = node.inputs["Location"]
             if location.is_linked or any(abs(v) > 1e-6 for v in location.default_value):
-                notes.append("location ignored")
+                notes.append("Mapping location")
         if kind != "NORMAL":
             scale = node.inputs["Scale"]
             if scale.is_linked or any(abs(v - 1) > 1e-6 for v in scale.default_value):
-                notes.append("scale ignored")
+                notes.append("Mapping scale")
         # The node nearest the texture acts last: lookup = R_near ... R_far d.
         matrix = matrix @ rotation
         node = _upstream(node.inputs["Vector"])
+    if node is not None and node.type != "TEX_COORD":
+        notes.append(f"{node.name} before the texture")
     return matrix, notes
 
 
-def _world_environment(world):
-    """(LightingSource, None) for the World's Environment Texture, or (None, why not)."""
-    if world is None:
-        return None, "no World"
-    # Before Blender 5.0 a World could switch its nodes off; 5.0 always uses them (and
-    # deprecates `use_nodes`).
-    uses_nodes = bpy.app.version >= (5, 0) or world.use_nodes
-    tree = world.node_tree if uses_nodes else None
-    if tree is None:
-        return None, "the World uses no nodes"
-    output = _world_output(tree)
+def _world_source(world):
+    """The World's LightingSource: the fast paths when they are exact, else a Cycles render."""
+    found, why = _world_environment(world)
+    if found is not None:
+        return found
+    return LightingSource("WORLD_RENDER", f"World: {world.name}, rendered by Cycles ({why})", world=world)
+
+
+def needs_render(world) -> bool:
+    """True when the World takes no fast path: its lighting comes from a Cycles render."""
+    return _world_environment(world)[0] is None
+
+
+def _plain_background(world):
+    """(the Background feeding the World Output directly, or None, why not)."""
+    tree = world.node_tree
+    output = _world_output(tree) if tree is not None else None
     if output is None:
         return None, "no World Output node"
-    background = _find_background(_upstream(output.inputs["Surface"]))
+    background = _upstream(output.inputs["Surface"])
+    if background is None or background.type != "BACKGROUND" or background.mute:
+        return None, "not a plain Background shader"
+    if background.inputs["Strength"].is_linked:
+        return None, "linked strength"
+    return background, None
+
+
+def _world_environment(world):
+    """(LightingSource of a fast path, None), or (None, why the World must be rendered)."""
+    if bpy.app.version < (5, 0) and not world.use_nodes:  # 5.0 always uses the nodes
+        color = np.array(world.color, np.float64)
+        return LightingSource("WORLD_COLOR", f"World: colour {tuple(np.round(color, 3))}", scale=color,
+                              world=world), None
+    background, why = _plain_background(world)
     if background is None:
-        return None, "no Background shader"
-    env = _upstream(background.inputs["Color"])
+        return None, why
+    strength = float(background.inputs["Strength"].default_value)
+    color_input = background.inputs["Color"]
+    if not color_input.is_linked:
+        color = np.array(color_input.default_value[:3], np.float64)
+        return LightingSource("WORLD_COLOR", f"World: colour ({', '.join(f'{c:.3g}' for c in color)}), "
+                                             f"strength {strength:g}", scale=color * strength, world=world), None
+    env = _upstream(color_input)
     if env is None or env.type != "TEX_ENVIRONMENT":
-        return None, "no Environment Texture"
+        return None, "not an Environment Texture"
     image = env.image
     if image is None:
         return None, "the Environment Texture has no image"
     if env.projection != "EQUIRECTANGULAR":
-        return None, f"{env.projection.lower().replace('_', ' ')} projection unsupported"
+        return None, f"{env.projection.lower().replace('_', ' ')} projection"
     if image.source not in ("FILE", "GENERATED"):
-        return None, f"{image.source.lower()} images unsupported"
+        return None, f"{image.source.lower()} image"
     path = _exr_path(image)
     if path is None and not _has_pixels(image):
         return None, f"image {image.name!r} has no pixels (missing file?)"
     rotation, notes = _mapping_rotation(env)
-    strength = float(background.inputs["Strength"].default_value)
-    if background.inputs["Strength"].is_linked:
-        notes.append("linked strength ignored")
-    label = f"World: {image.name}, strength {strength:g}" + (f" ({', '.join(notes)})" if notes else "")
+    if notes:
+        return None, ", ".join(notes)
+    label = f"World: {image.name}, strength {strength:g}"
     return LightingSource("WORLD", label, image=image, path=path, rotation=rotation,
-                          scale=np.full(3, strength)), None
+                          scale=np.full(3, strength), world=world), None
 
 
 def _exr_path(image):
@@ -397,19 +477,3 @@ def _image_pixels(image):
     if not image.is_float and image.colorspace_settings.name == "sRGB":
         rgb = np.where(rgb <= 0.04045, rgb / 12.92, ((rgb + 0.055) / 1.055) ** 2.4)
     return np.ascontiguousarray(rgb, dtype=np.float32)
-
-
-# ----------------------------------------------------------------------------------------
-# Sun lamps
-
-
-def _sun_lamps(scene):
-    for obj in scene.objects:
-        if obj.type != "LIGHT" or obj.data.type != "SUN" or obj.hide_render:
-            continue
-        try:
-            visible = obj.visible_get()
-        except (RuntimeError, TypeError):
-            visible = not obj.hide_viewport
-        if visible and obj.data.energy > 0:
-            yield obj

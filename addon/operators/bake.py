@@ -18,7 +18,7 @@ import numpy as np
 
 import bpy
 
-from .. import cache, engine_bridge, mesh_io
+from .. import cache, engine_bridge, lamps, mesh_io, staleness, world_render
 
 __all__ = ["BakeJob", "BakeResult", "bake_range", "HEMISHADOW_OT_bake_animation", "HEMISHADOW_OT_clear_bake", "classes"]
 
@@ -51,8 +51,10 @@ class BakeJob:
     location: "FILE" (npz per object in `directory`, default `//hemishadow_cache`) or "PACKED".
     store_transfer: keep the transfer vectors (float16) so lighting can change after the bake.
     progress: called on the main thread as progress(frames_done, frame_count).
-    cancel: a threading.Event; when set, the job stops after the frame in flight and saves nothing.
-    Raises ValueError for objects that cannot be baked (not meshes, in Edit Mode, empty range).
+    cancel: a threading.Event; when set, the job stops (the engine between chunks of vertices of
+        the frame in flight) and saves nothing.
+    Raises ValueError for objects that cannot be baked (not meshes, in Edit Mode, empty range)
+    and for a cache folder that cannot be written, before any frame is computed.
     """
 
     def __init__(self, context_or_scene, objects, frame_start, frame_end, *, location="FILE", directory=None,
@@ -67,16 +69,22 @@ class BakeJob:
         self.result = BakeResult()
         self._check()
         if location == "FILE":
-            for obj in self.objects:   # fail now, not after the last frame, when `//` has no folder
-                cache._absolute(cache.cache_path(obj, directory))
+            for obj in self.objects:   # fail now, not after the last frame
+                cache.check_directory(obj, directory)
         self._restore_frame = self.scene.frame_current
         self._next_frame = self.frame_start
         self._pending: list[tuple[int, Future]] = []
         self._frames: dict[str, dict[int, tuple]] = {obj.name: {} for obj in self.objects}
+        self._fingerprints: dict[str, dict[int, np.ndarray]] = {obj.name: {} for obj in self.objects}
         self._meta = {obj.name: self._object_meta(obj) for obj in self.objects}
         self._solvers = {}
+        # An animated World is rendered for every frame now: the frame handlers cannot.
+        world_render.precompute(self.scene, range(self.frame_start, self.frame_end + 1))
         self._shading = {obj.name: _shading_of(obj, self.scene) for obj in self.objects}
+        self._lamps: dict[int, tuple] = {}   # frame -> (lamps, their key)
         self._executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="hemishadow-bake")
+        self._inflight = 0.0    # fraction of the frame the worker is computing (it writes, we read)
+        self._fraction = 0.0
         self._baking = cache.baking()
         self._baking.__enter__()
         self.finished = False
@@ -84,6 +92,19 @@ class BakeJob:
     @property
     def frame_count(self) -> int:
         return self.frame_end - self.frame_start + 1
+
+    @property
+    def fraction_done(self) -> float:
+        """Main thread: the fraction of the range done, within frames too (the engine's progress
+        through the vertices of the frame it computes); never goes back."""
+        now = (self.result.frames_done + min(self._inflight, 1.0)) / self.frame_count
+        self._fraction = max(self._fraction, min(now, 1.0))
+        return self._fraction
+
+    def _engine_progress(self, fraction: float) -> bool:
+        """Worker thread, from the engine: note the frame's progress; False (stop) once cancelled."""
+        self._inflight = fraction
+        return not self.cancel.is_set()
 
     def _check(self):
         if self.frame_end < self.frame_start:
@@ -106,14 +127,18 @@ class BakeJob:
         if known is None or known[0] != key:
             known = self._solvers[obj.name] = (key, _make_solver(obj, vertices, triangles))
         solver = known[1]
-        lighting, albedo = self._shading[obj.name]
+        _, albedo = self._shading[obj.name]
+        lighting = engine_bridge.scene_lighting(self.scene, obj.hemishadow.band_count)   # this frame's
         view = engine_bridge._view_directions(obj, self.scene, vertices)   # None for diffuse
-        return FrameInput(solver, vertices, normals, view, lighting, albedo)
+        self._fingerprints[obj.name][self.scene.frame_current] = staleness.fingerprint(
+            vertices, cache._eye(obj, self.scene))
+        frame_lamps = self._lamps[self.scene.frame_current][0]
+        return FrameInput(solver, vertices, normals, view, lighting, albedo, frame_lamps)
 
     def _object_meta(self, obj) -> dict:
         return dict(version=cache.VERSION, object=obj.name, frame_start=self.frame_start,
                     signature=cache.signature(obj), rest=cache.rest_signature(obj),
-                    settings=cache.transfer_settings(obj))
+                    settings=cache.transfer_settings(obj), inputs=staleness.inputs(obj, self.scene))
 
     # -- the steps --------------------------------------------------------------------------
 
@@ -138,9 +163,12 @@ class BakeJob:
         t0 = time.perf_counter()
         self.scene.frame_set(frame)
         depsgraph = bpy.context.evaluated_depsgraph_get()
+        found = lamps.scene_lamps(self.scene)
+        self._lamps[frame] = (found, lamps.lamps_key(self.scene))
         inputs = [self._frame_input(obj, depsgraph) for obj in self.objects]
         self.result.blender_seconds += time.perf_counter() - t0
-        self._pending.append((frame, self._executor.submit(_compute_frame, inputs, self.store_transfer)))
+        self._pending.append((frame, self._executor.submit(_compute_frame, inputs, self.store_transfer,
+                                                           self._engine_progress)))
 
     def _collect(self, block: bool, timeout: float = 0.0):
         while self._pending:
@@ -154,8 +182,11 @@ class BakeJob:
                     return
                 except Exception:
                     pass   # raised again below
+            if self.cancel.is_set() and _was_cancelled(future):
+                return   # the engine stopped for the cancel: step() finishes the job
             self._pending.pop(0)
             outputs, seconds = future.result()
+            self._inflight = 0.0
             self.result.engine_seconds += seconds
             for obj, output in zip(self.objects, outputs):
                 self._frames[obj.name][frame] = output
@@ -197,36 +228,50 @@ class BakeJob:
         first = frames[self.frame_start]
         meta["lighting"] = np.asarray(first[3], np.float32).tolist()
         meta["albedo"] = np.asarray(first[4], np.float32).tolist()
-        return cache.BakeCache(self.frame_start, radiance, ao, transfer, meta)
+        meta["lamps"] = self._lamps[self.frame_start][1]
+        fingerprint = np.stack([self._fingerprints[obj.name][f] for f in order])
+        return cache.BakeCache(self.frame_start, radiance, ao, transfer, meta, fingerprint)
 
 
 class FrameInput:
     """One object's arrays for one frame, and the solver that turns them into transfer."""
 
-    __slots__ = ("solver", "vertices", "normals", "view", "lighting", "albedo")
+    __slots__ = ("solver", "vertices", "normals", "view", "lighting", "albedo", "lamps")
 
-    def __init__(self, solver, vertices, normals, view, lighting, albedo):
+    def __init__(self, solver, vertices, normals, view, lighting, albedo, lamps=()):
         self.solver, self.vertices, self.normals, self.view = solver, vertices, normals, view
-        self.lighting, self.albedo = lighting, albedo
+        self.lighting, self.albedo, self.lamps = lighting, albedo, lamps
 
-    def compute(self):
-        """Worker thread: (transfer (V, K), radiance (V, 3), ao (V,))."""
+    def compute(self, progress=None):
+        """Worker thread: (transfer (V, K), radiance (V, 3), ao (V,)). `progress` is the engine's
+        (a False return stops it with hemishadow.Cancelled)."""
         import hemishadow
 
-        transfer = self.solver.solve(self.vertices, self.normals, view=self.view)
-        return (transfer, hemishadow.shade(transfer, self.lighting, self.albedo),
-                hemishadow.ambient_occlusion(transfer))
+        transfer = self.solver.solve(self.vertices, self.normals, view=self.view, progress=progress)
+        radiance = hemishadow.shade(transfer, self.lighting, self.albedo)
+        if self.lamps:   # numpy only: safe in the worker
+            radiance += np.asarray(self.albedo, np.float32) / np.pi * lamps.lamp_irradiance(
+                transfer, self.vertices, self.lamps)
+        return transfer, radiance, hemishadow.ambient_occlusion(transfer)
 
 
-def _compute_frame(inputs, store_transfer):
-    """Worker thread: no bpy here, only numpy arrays and the engine."""
+def _compute_frame(inputs, store_transfer, progress=None):
+    """Worker thread: no bpy here, only numpy arrays and the engine. `progress(fraction of the
+    frame)` as the engine's."""
     t0 = time.perf_counter()
     outputs = []
-    for item in inputs:
-        transfer, radiance, ao = item.compute()
+    for i, item in enumerate(inputs):
+        share = None if progress is None else (lambda f, i=i: progress((i + f) / len(inputs)))
+        transfer, radiance, ao = item.compute(share)
         outputs.append((radiance, ao, transfer.astype(np.float16) if store_transfer else None,
                         item.lighting, item.albedo))
     return outputs, time.perf_counter() - t0
+
+
+def _was_cancelled(future) -> bool:
+    import hemishadow
+
+    return future.done() and isinstance(future.exception(), hemishadow.Cancelled)
 
 
 # -- the live path's pieces (mesh_io, engine_bridge), used the same way -------------------------
@@ -248,15 +293,21 @@ def _shading_of(obj, scene):
 
 
 def bake_range(context_or_scene, objects, frame_start, frame_end, *, progress=None, cancel=None, location="FILE",
-               directory=None, store_transfer=True) -> BakeResult:
+               directory=None, store_transfer=True, fraction=None) -> BakeResult:
     """Bake `objects` over frame_start..frame_end (inclusive) into their caches and return a
     `BakeResult`. Blocks until done; `cancel` (threading.Event) stops it early, saving nothing.
-    Arguments as `BakeJob`."""
+    `fraction`: called on this thread with `BakeJob.fraction_done` whenever it grew (for a
+    progress bar that moves within the frames of a heavy mesh). Other arguments as `BakeJob`."""
     job = BakeJob(context_or_scene, objects, frame_start, frame_end, progress=progress, cancel=cancel,
                   location=location, directory=directory, store_transfer=store_transfer)
+    shown = -1.0
     try:
-        while not job.step(budget_seconds=0.5):
-            pass
+        while not job.step(budget_seconds=0.1 if fraction else 0.5):
+            if fraction is not None and job.fraction_done > shown:
+                shown = job.fraction_done
+                fraction(shown)
+        if fraction is not None and job.fraction_done > shown:
+            fraction(job.fraction_done)   # the last frames, collected by the final step
     except BaseException:
         job.abort()
         raise

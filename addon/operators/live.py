@@ -6,6 +6,7 @@ reports it."""
 import bpy
 
 from .. import engine_bridge, material, mesh_io
+from .jobs import ComputeInBackground
 
 _TARGETS = [("AUTO", "Auto", "Selected meshes when any are selected, else all enabled objects"),
             ("SELECTED", "Selected", "Selected mesh objects"),
@@ -19,7 +20,7 @@ def target_objects(context, target):
     return engine_bridge.enabled_objects(context.scene)
 
 
-class HEMISHADOW_OT_compute(bpy.types.Operator):
+class HEMISHADOW_OT_compute(ComputeInBackground, bpy.types.Operator):
     """Compute self-shadowing now and write the hemishadow_ attributes"""
 
     bl_idname = "hemishadow.compute"
@@ -39,6 +40,10 @@ class HEMISHADOW_OT_compute(bpy.types.Operator):
             return {"CANCELLED"}
         if errors:
             self.report({"WARNING"}, "; ".join(errors.values()))
+        from .. import lighting
+
+        for message in lighting.report(context.scene):  # fallbacks, lamps not represented
+            self.report({"WARNING"}, message)
         return {"FINISHED"}
 
 

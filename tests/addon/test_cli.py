@@ -5,7 +5,9 @@ registers with `bpy.utils.register_cli_command` (addon.cli.main) with argv lists
 .blend file that is open, exactly as Blender would after loading FILE.blend.
 """
 
+import os
 import pathlib
+import signal
 
 import numpy as np
 import pytest
@@ -72,9 +74,18 @@ def test_compute_without_save_leaves_the_file_alone(cli, blend):
 
 
 def test_bake_to_files_beside_the_blend(cli, addon, blend, capsys):
-    assert cli(["bake", "--start", "1", "--end", "4", "--objects", "Proxy", "Icosphere", "--save"]) == 0
-    out = capsys.readouterr().out
-    assert "baked 4/4 frames" in out and "Proxy: frames 1..4 -> //hemishadow_cache/Proxy.npz" in out
+    old = os.umask(0o027)
+    try:
+        assert cli(["bake", "--start", "1", "--end", "4", "--objects", "Proxy", "Icosphere", "--save"]) == 0
+    finally:
+        os.umask(old)
+    output = capsys.readouterr()
+    assert "Proxy: frames 1..4 -> //hemishadow_cache/Proxy.npz" in output.out
+    # Progress on stderr, a line per 10 % band reached (not a terminal here), within frames too.
+    percents = [int(line.split()[1]) for line in output.err.splitlines()]
+    assert all(line.startswith("bake: ") for line in output.err.splitlines())
+    assert percents[0] == 0 and percents[-1] == 100 and percents == sorted(set(percents))
+    assert (blend.parent / "hemishadow_cache" / "Proxy.npz").stat().st_mode & 0o777 == 0o640
     assert (blend.parent / "hemishadow_cache" / "Proxy.npz").is_file()
     assert (blend.parent / "hemishadow_cache" / "Icosphere.npz").is_file()
     scene = reopen(blend)
@@ -119,3 +130,44 @@ def test_failures_exit_1_with_a_message(cli, capsys):
     assert "hemishadow: error: the .blend file is not saved" in capsys.readouterr().err
     assert cli(["compute", "--objects", "Cube", "--save"]) == 1
     assert "never been saved" in capsys.readouterr().err
+
+
+def test_compute_shows_the_engine_progress(cli, blend, capsys):
+    assert cli(["compute", "--objects", "Proxy"]) == 0
+    lines = capsys.readouterr().err.splitlines()
+    assert lines[0] == "compute: 0 %" and lines[-1] == "compute: 100 %", lines
+
+
+@pytest.fixture
+def ctrl_c_at_first_progress(monkeypatch):
+    """Press Ctrl-C (a real SIGINT to this process) when the first progress is shown."""
+    import hemishadow.cli
+
+    class Interrupting(hemishadow.cli.ProgressBar):
+        def __call__(self, fraction):
+            if fraction > 0 and not self.interrupted.is_set():
+                os.kill(os.getpid(), signal.SIGINT)
+            return super().__call__(fraction)
+
+    monkeypatch.setattr(hemishadow.cli, "ProgressBar", Interrupting)
+
+
+@pytest.mark.parametrize("command", [["compute"], ["bake", "--start", "1", "--end", "6"]])
+def test_ctrl_c_cancels_and_saves_nothing(cli, addon, blend, capsys, ctrl_c_at_first_progress, command):
+    before = blend.stat().st_mtime_ns
+    assert cli([*command, "--objects", "Proxy", "--save"]) == 130
+    err = capsys.readouterr().err
+    assert "hemishadow: cancelled (Ctrl-C): nothing saved" in err and "Traceback" not in err
+    assert blend.stat().st_mtime_ns == before
+    assert not (blend.parent / "hemishadow_cache").exists()
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler   # Ctrl-C behaves as before
+
+
+def test_a_bad_cache_folder_fails_before_baking(cli, blend, capsys):
+    (blend.parent / "taken").write_text("a file where the folder should be")
+    folder = blend.parent / "taken" / "cache"
+    assert cli(["bake", "--start", "1", "--end", "3", "--objects", "Proxy", "--cache-dir", str(folder)]) == 1
+    output = capsys.readouterr()
+    assert f"hemishadow: error: cannot use the cache folder {folder}: " in output.err
+    assert "is a file, not a folder" in output.err
+    assert "bake:" not in output.err and "baked" not in output.out   # not a frame computed

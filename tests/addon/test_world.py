@@ -1,10 +1,10 @@
 """addon/world.py: the lighting SH of a scene (World, built-in HDRIs, uniform sky, sun lamps).
 
-world.py is loaded on its own (it imports no other add-on module), with settings passed as a
-plain namespace, so these tests need neither the installed extension nor its properties.
+world.py is imported from the repository's `addon` package without registering it, with
+settings passed as a plain namespace, so these tests need neither the installed extension nor
+its properties.
 """
 
-import importlib.util
 import math
 import pathlib
 import sys
@@ -19,10 +19,8 @@ from hemishadow.environment import builtin_hdris, read_exr, write_exr  # noqa: E
 from mathutils import Vector  # noqa: E402  (comes with bpy)
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
-_spec = importlib.util.spec_from_file_location("hemishadow_addon_world", ROOT / "addon" / "world.py")
-world = importlib.util.module_from_spec(_spec)
-sys.modules[_spec.name] = world
-_spec.loader.exec_module(world)
+sys.path.insert(0, str(ROOT))
+from addon import world  # noqa: E402
 
 FOREST = builtin_hdris()["forest"]
 
@@ -188,15 +186,14 @@ def test_byte_image_is_decoded_from_srgb(scene):
 # Fallbacks and scene settings
 
 
-def test_no_environment_texture_falls_back_to_the_builtin_hdri(scene):
-    scene.world = bpy.data.worlds.new("plain")
-    if bpy.app.version < (5, 0):  # a node tree with a Background but no Environment Texture
-        scene.world.use_nodes = True
+def test_no_world_falls_back_to_the_builtin_hdri_and_says_so(scene):
+    scene.world = None
     chosen = settings(hdri="city")
     source = world.lighting_source(scene, chosen)
-    assert source.kind == "BUILTIN" and "no Environment Texture" in source.label
+    assert source.kind == "BUILTIN" and "no World" in source.label
     np.testing.assert_allclose(world.scene_lighting(scene, 3, chosen),
                                hemishadow.project_environment(builtin_hdris()["city"], 3), rtol=1e-5, atol=1e-6)
+    assert any("no World" in m for m in world.notes(scene))  # for the status bar and reports
 
 
 def test_builtin_source_ignores_the_world(scene):

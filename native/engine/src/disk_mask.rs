@@ -13,9 +13,10 @@ pub const MASK_SIDE: usize = 32;
 pub const MASK_CELLS: usize = MASK_SIDE * MASK_SIDE;
 pub const MASK_WORDS: usize = MASK_CELLS / 64;
 
-/// 1024 bits, two mask rows per 64-bit word; aligned for 256-bit loads.
+/// 1024 bits, two mask rows per 64-bit word; aligned to a cache line, so a mask is exactly
+/// two lines (one prefetch each).
 #[derive(Clone, Copy, PartialEq, Eq, Default, Debug)]
-#[repr(C, align(32))]
+#[repr(C, align(64))]
 pub struct Mask(pub [u64; MASK_WORDS]);
 
 impl Mask {

@@ -132,6 +132,21 @@ impl PlaneTable {
     pub fn mask_at(&self, texel: u32) -> &Mask {
         &self.masks[texel as usize]
     }
+
+    /// Asks the CPU to bring a texel's mask (two 64-byte lines) into cache ahead of its use.
+    #[inline(always)]
+    pub fn prefetch(&self, texel: u32) {
+        #[cfg(target_arch = "x86_64")]
+        if let Some(mask) = self.masks.get(texel as usize) {
+            use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
+            let p = mask as *const Mask as *const i8;
+            // SAFETY: prefetching is a hint and never faults; both lines lie inside the mask.
+            unsafe {
+                _mm_prefetch(p, _MM_HINT_T0);
+                _mm_prefetch(p.add(64), _MM_HINT_T0);
+            }
+        }
+    }
 }
 
 #[cfg(test)]

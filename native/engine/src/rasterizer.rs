@@ -54,23 +54,30 @@ pub fn triangle_mask(table: &PlaneTable, a: [f32; 3], b: [f32; 3], c: [f32; 3]) 
 /// Blocker triangles queued in structure-of-arrays form, rasterized `LANES` at a time so that
 /// the edge planes, the flat-cone test and the table indices of a batch are computed with
 /// vector instructions (Embree-style SoA packets); only the table fetches stay scalar.
+///
+/// The fetches are what the kernel waits on (the 12 MiB table does not stay in cache), so
+/// they are pipelined: a full batch computes its texels and prefetches their masks, then ORs
+/// the previous batch's masks, which have arrived meanwhile. `finish` ORs what is left.
 pub struct TriangleBatch {
     /// Corner k, component j, lane i: `corners[k][j][i]`.
     corners: [[[f32; LANES]; 3]; 3],
     len: usize,
+    /// Texels (edge ab, bc, ca) of the previous batch's kept triangles, prefetched, not OR-ed.
+    pending: [[u32; 3]; LANES],
+    pending_len: usize,
 }
 
 pub const LANES: usize = 8;
 
 impl Default for TriangleBatch {
     fn default() -> Self {
-        TriangleBatch { corners: [[[0.0; LANES]; 3]; 3], len: 0 }
+        TriangleBatch { corners: [[[0.0; LANES]; 3]; 3], len: 0, pending: [[0; 3]; LANES], pending_len: 0 }
     }
 }
 
 impl TriangleBatch {
-    /// Queues a triangle (local coordinates, at least one corner above the horizon); flushes
-    /// into `mask` when the batch is full.
+    /// Queues a triangle (local coordinates, at least one corner above the horizon); full
+    /// batches go through the pipeline into `mask`.
     #[inline(always)]
     pub fn push(&mut self, table: &PlaneTable, a: [f32; 3], b: [f32; 3], c: [f32; 3], mask: &mut Mask) {
         let i = self.len;
@@ -85,9 +92,17 @@ impl TriangleBatch {
         }
     }
 
-    /// Rasterizes the queued triangles into `mask` and empties the batch.
+    /// Rasterizes everything queued into `mask` and empties the batch and the pipeline.
     #[inline(always)]
-    pub fn flush(&mut self, table: &PlaneTable, mask: &mut Mask) {
+    pub fn finish(&mut self, table: &PlaneTable, mask: &mut Mask) {
+        self.flush(table, mask);
+        self.or_pending(table, mask);
+    }
+
+    /// Texels of the queued triangles are computed and prefetched, the previous batch is OR-ed
+    /// into `mask`, and the queued ones become the pending batch.
+    #[inline(always)]
+    fn flush(&mut self, table: &PlaneTable, mask: &mut Mask) {
         let [a, b, c] = &self.corners;
         let mut planes = [[[0.0f32; LANES]; 3]; 3]; // edge ab, bc, ca; component; lane
         let mut keep = [false; LANES];
@@ -107,13 +122,27 @@ impl TriangleBatch {
         for e in 0..3 {
             table.texels(&planes[e][0], &planes[e][1], &planes[e][2], &mut texels[e]);
         }
+        let mut next = [[0u32; 3]; LANES];
+        let mut next_len = 0;
         for i in 0..self.len {
             if keep[i] {
-                let covered = Mask::and3(table.mask_at(texels[0][i]), table.mask_at(texels[1][i]), table.mask_at(texels[2][i]));
-                mask.or_assign(&covered);
+                next[next_len] = [texels[0][i], texels[1][i], texels[2][i]];
+                next[next_len].iter().for_each(|&t| table.prefetch(t));
+                next_len += 1;
             }
         }
+        self.or_pending(table, mask);
+        self.pending = next;
+        self.pending_len = next_len;
         self.len = 0;
+    }
+
+    #[inline(always)]
+    fn or_pending(&mut self, table: &PlaneTable, mask: &mut Mask) {
+        for [ab, bc, ca] in &self.pending[..self.pending_len] {
+            mask.or_assign(&Mask::and3(table.mask_at(*ab), table.mask_at(*bc), table.mask_at(*ca)));
+        }
+        self.pending_len = 0;
     }
 }
 

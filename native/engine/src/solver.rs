@@ -366,7 +366,7 @@ impl Solver {
                 break 'groups;
             }
         }
-        batch.flush(&self.table, &mut mask);
+        batch.finish(&self.table, &mut mask);
         let view = frame.views.map_or(receiver.frame.n, |v| v[r as usize]);
         self.quadrature.integrate(&mask, &receiver.frame, self.brdf, view, out);
         rasterized

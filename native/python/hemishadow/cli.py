@@ -1,11 +1,20 @@
-"""Command-line entry point: `python -m hemishadow transfer MESH --env EXR ...`."""
+"""Command-line entry point: `python -m hemishadow transfer MESH --env EXR ...`.
+
+The transfer is computed by `TransferSolver` (built from the mesh, solved once), with a
+progress bar on stderr: redrawn in place (`\r[#####.........] 35 %`) when stderr is a
+terminal, one line per 10 % otherwise (logs, pipes). Ctrl-C cancels: the solve stops between
+chunks of vertices, nothing is written, and the exit code is 130.
+"""
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import math
 import os
+import signal
 import sys
+import threading
 import time
 
 import numpy as np
@@ -56,16 +65,68 @@ def _output_paths(mesh_path: str, out: str | None) -> tuple[str, str]:
     return stem + ext, stem + ".npz"
 
 
+class ProgressBar:
+    """A progress callback for the engine (fraction done, 0..1) that draws on `stream`: a bar
+    redrawn in place on a terminal, else a line each time another `step` (10 %) is reached. Returns False, which
+    cancels the engine's work, once `interrupted` is set (by Ctrl-C, see `cancel_on_ctrl_c`)."""
+
+    def __init__(self, label: str, stream=None, width: int = 30, step: int = 10):
+        self.label, self.stream, self.width, self.step = label, stream or sys.stderr, width, step
+        self.tty = bool(getattr(self.stream, "isatty", lambda: False)())
+        self.interrupted = threading.Event()
+        self._shown = -1
+
+    def __call__(self, fraction: float) -> bool:
+        if self.interrupted.is_set():
+            return False
+        percent = int(min(max(float(fraction), 0.0), 1.0) * 100)
+        if percent < self._shown:   # a new pass (the next object): start over
+            self.close()
+            self._shown = -1
+        if self.tty and percent != self._shown:
+            filled = percent * self.width // 100
+            self.stream.write(f"\r{self.label} [{'#' * filled}{'.' * (self.width - filled)}] {percent:3d} %")
+            self.stream.flush()
+            self._shown = percent
+        elif not self.tty and percent // self.step > self._shown // self.step:
+            self.stream.write(f"{self.label}: {percent} %\n")
+            self.stream.flush()
+            self._shown = percent
+        return True
+
+    def close(self) -> None:
+        """End the bar's line on a terminal (after the work, done or not)."""
+        if self.tty and self._shown >= 0:
+            self.stream.write("\n")
+            self.stream.flush()
+            self._shown = -1
+
+
+@contextlib.contextmanager
+def cancel_on_ctrl_c(flag: threading.Event):
+    """While inside, Ctrl-C sets `flag` instead of raising KeyboardInterrupt anywhere: the
+    engine's progress callback sees it and cancels between chunks, and a write in progress is
+    finished (callers check the flag after). Outside the main thread nothing changes."""
+    if threading.current_thread() is not threading.main_thread():
+        yield flag
+        return
+    previous = signal.signal(signal.SIGINT, lambda *_: flag.set())
+    try:
+        yield flag
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
 def _is_y_up(mesh_path: str, up: str) -> bool:
     if up != "auto":
         return up == "y"
     return os.path.splitext(mesh_path)[1].lower() in _Y_UP_EXTENSIONS
 
 
-def run_transfer(args) -> None:
+def run_transfer(args) -> int:
     import hemishadow
     from .environment import default_hdri
-    from .meshio import load_mesh, save_colored_mesh, save_npz
+    from .meshio import colored_mesh_bytes, load_mesh, npz_bytes, write_files
 
     if not math.isfinite(args.intensity) or args.intensity < 0:
         raise ValueError(f"--intensity must be a non-negative number, got {args.intensity}")
@@ -80,16 +141,29 @@ def run_transfer(args) -> None:
     lighting = hemishadow.project_environment(os.fspath(env), bands=bands)
     lighting = (np.asarray(lighting, dtype=np.float32) * np.float32(args.intensity))
 
-    start = time.perf_counter()
-    transfer = hemishadow.transfer(world_v, triangles, world_n, bands=bands)
-    elapsed_ms = (time.perf_counter() - start) * 1000.0
+    bar = ProgressBar("transfer")
+    with cancel_on_ctrl_c(bar.interrupted):
+        start = time.perf_counter()
+        bar(0.0)   # building the solver takes a while on large meshes, without progress of its own
+        try:
+            solver = hemishadow.TransferSolver(world_v, triangles, bands=bands)
+            transfer = solver.solve(world_v, world_n, progress=bar) if not bar.interrupted.is_set() else None
+        except hemishadow.Cancelled:
+            transfer = None
+        finally:
+            bar.close()
+        if transfer is None:
+            return _cancelled()
+        elapsed_ms = (time.perf_counter() - start) * 1000.0
 
-    albedo = np.full((len(vertices), 3), ALBEDO, dtype=np.float32)
-    radiance = hemishadow.shade(transfer, lighting, albedo)
-    ao = np.asarray(hemishadow.ambient_occlusion(transfer))
-
-    save_colored_mesh(mesh_out, vertices, triangles, radiance)
-    save_npz(npz_out, transfer=transfer, radiance=radiance, ambient_occlusion=ao, lighting=lighting)
+        albedo = np.full((len(vertices), 3), ALBEDO, dtype=np.float32)
+        radiance = hemishadow.shade(transfer, lighting, albedo)
+        ao = np.asarray(hemishadow.ambient_occlusion(transfer))
+        files = {mesh_out: colored_mesh_bytes(mesh_out, vertices, triangles, radiance),
+                 npz_out: npz_bytes(transfer=transfer, radiance=radiance, ambient_occlusion=ao, lighting=lighting)}
+        if bar.interrupted.is_set():
+            return _cancelled()
+        write_files(files)   # not interrupted: both files or none
 
     print(f"vertices: {len(vertices)}")
     print(f"triangles: {len(triangles)}")
@@ -100,16 +174,21 @@ def run_transfer(args) -> None:
     print(f"ambient occlusion max: {ao.max():.4f}")
     print(f"wrote: {mesh_out}")
     print(f"wrote: {npz_out}")
+    return 0
+
+
+def _cancelled() -> int:
+    print("hemishadow: cancelled (Ctrl-C): nothing written", file=sys.stderr)
+    return 130
 
 
 def main(argv=None) -> int:
     args = _parser().parse_args(argv)
     try:
         if args.command == "transfer":
-            run_transfer(args)
-    except KeyboardInterrupt:
-        print("hemishadow: interrupted", file=sys.stderr)
-        return 130
+            return run_transfer(args)
+    except KeyboardInterrupt:   # Ctrl-C while loading the mesh or the environment
+        return _cancelled()
     except Exception as exc:  # a tool for people: one clear line, no traceback
         print(f"hemishadow: error: {exc}", file=sys.stderr)
         return 2

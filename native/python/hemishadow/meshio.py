@@ -8,19 +8,25 @@ Vertex colors in written files:
   COLOR_0 as linear, and Blender's glTF importer and web viewers read it that way.
 - PLY: 8-bit RGBA, *sRGB*-encoded from the linear input, clipped to [0, 1], as Blender's
   PLY importer and most viewers expect byte colors to be.
+
+Files are written atomically (a temporary file beside the target, then renamed) and get the
+permissions of any new file: 0666 less the umask (usually 0644), not the private 0600 of
+`tempfile.mkstemp`.
 """
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 import os
 import struct
+import uuid
 
 import numpy as np
 
-from .environment import _atomic_write
-
-__all__ = ["load_mesh", "save_colored_mesh", "save_npz", "linear_to_srgb8"]
+__all__ = ["colored_mesh_bytes", "load_mesh", "npz_bytes", "save_colored_mesh", "save_npz", "linear_to_srgb8",
+           "write_files"]
 
 
 def load_mesh(path):
@@ -97,6 +103,11 @@ def linear_to_srgb8(colors) -> np.ndarray:
 
 def save_colored_mesh(path, vertices, triangles, colors) -> None:
     """Write a mesh with per-vertex linear RGB colors (N, 3) as .glb or .ply, atomically."""
+    write_files({path: colored_mesh_bytes(path, vertices, triangles, colors)})
+
+
+def colored_mesh_bytes(path, vertices, triangles, colors) -> bytes:
+    """The bytes `save_colored_mesh` writes; the format is chosen by `path`'s extension."""
     vertices = np.asarray(vertices, dtype=np.float32).reshape(-1, 3)
     triangles = np.asarray(triangles, dtype=np.uint32).reshape(-1, 3)
     colors = np.asarray(colors, dtype=np.float32)
@@ -112,12 +123,7 @@ def save_colored_mesh(path, vertices, triangles, colors) -> None:
         data = _ply_bytes(vertices, triangles, colors)
     else:
         raise ValueError(f"{path}: unsupported mesh format {ext!r} (use .glb or .ply)")
-    _atomic_write(path, lambda tmp: _write_bytes(tmp, data))
-
-
-def _write_bytes(path, data: bytes) -> None:
-    with open(path, "wb") as f:
-        f.write(data)
+    return data
 
 
 def _ply_bytes(vertices, triangles, colors) -> bytes:
@@ -173,8 +179,35 @@ def _glb_bytes(vertices, triangles, colors) -> bytes:
 
 def save_npz(path, **arrays) -> None:
     """np.savez_compressed, atomically (path should end in .npz)."""
-    def write(tmp):
-        with open(tmp, "wb") as f:  # a file object stops numpy from appending ".npz"
-            np.savez_compressed(f, **arrays)
+    write_files({path: npz_bytes(**arrays)})
 
-    _atomic_write(path, write)
+
+def npz_bytes(**arrays) -> bytes:
+    buffer = io.BytesIO()   # a file object also stops numpy from appending ".npz"
+    np.savez_compressed(buffer, **arrays)
+    return buffer.getvalue()
+
+
+def write_files(files: dict) -> None:
+    """Write {path: bytes}: every file to a temporary file beside its target first, then all
+    renamed into place, so that a failure while writing leaves none of them (and no temporary
+    file). New files get 0666 less the umask, as the kernel applies it."""
+    staged = []
+    try:
+        for path, data in files.items():
+            path = os.fspath(path)
+            folder = os.path.dirname(os.path.abspath(path))
+            os.makedirs(folder, exist_ok=True)
+            temporary = os.path.join(folder, f".tmp-{uuid.uuid4().hex}{os.path.splitext(path)[1]}")
+            handle = os.open(temporary, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0), 0o666)
+            staged.append((temporary, path))
+            with os.fdopen(handle, "wb") as file:
+                file.write(data)
+        while staged:
+            temporary, path = staged[0]
+            os.replace(temporary, path)
+            staged.pop(0)
+    finally:
+        for temporary, _ in staged:
+            with contextlib.suppress(OSError):
+                os.unlink(temporary)
