@@ -230,13 +230,15 @@ def _channelbags(action) -> list:
 
 
 def _action_fcurves(action) -> list:
+    if bpy.app.version < (4, 4):  # before layered actions, an Action holds its F-Curves
+        return list(action.fcurves)
     return [curve for bag in _channelbags(action) for curve in bag.fcurves]
 
 
 def _action_values(animation) -> list:
     values = []
     actions = [animation.action] if animation.action is not None else []
-    slot = animation.action_slot
+    slot = getattr(animation, "action_slot", None)  # Blender 4.4+
     values += [animation.action.name if animation.action else None, slot.identifier if slot else None,
                animation.action_extrapolation, animation.action_blend_type, animation.action_influence,
                animation.use_nla]

@@ -1,12 +1,18 @@
 #!/usr/bin/env bash
-# Make the project-local environment .venv (Python 3.11, the pinned requirements) and
-# build the Rust engine into it in release mode. Safe to run again: each step is
-# skipped when its inputs have not changed.
+# Make the project-local environments and build the Rust engine into the primary one.
+#
+#   .venv          Python 3.13, requirements.txt (bpy 5.3, the primary test version), the engine
+#                  built in release mode (maturin develop);
+#   .venv-X.Y      with --all: one per requirements-X.Y.txt, the second-tier Blender versions
+#                  (bpy X.Y on the Python named in that file); the engine comes from the zip.
+#
+# Safe to run again: each step is skipped when its inputs have not changed.
 set -euo pipefail
 
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$ROOT"
 VENV="$ROOT/.venv"
+PRIMARY_PYTHON="3.13"
 MIN_RUST="1.85"
 
 say() { echo "setup: $*"; }
@@ -23,11 +29,17 @@ apt_install() {
     as_root env DEBIAN_FRONTEND=noninteractive apt-get install -y -q "$@"
 }
 
-# A python3.11 that really runs (a pyenv shim may exist without the version behind it).
-find_python311() {
-    local candidate
-    for candidate in python3.11 /usr/bin/python3.11 /usr/local/bin/python3.11; do
-        if "$candidate" -c 'import sys, venv; assert sys.version_info[:2] == (3, 11)' >/dev/null 2>&1; then
+# A pythonX.Y that really runs (a pyenv shim may exist without the version behind it, and
+# pyenv keeps versions that are not selected under its root).
+find_python() {  # find_python X.Y
+    local want="$1" candidate
+    local candidates=("python$want" "/usr/bin/python$want" "/usr/local/bin/python$want")
+    if command -v pyenv >/dev/null; then
+        candidates+=("$(pyenv root)"/versions/"$want".*/bin/python"$want")
+    fi
+    for candidate in "${candidates[@]}"; do
+        if "$candidate" -c "import sys, venv; assert sys.version_info[:2] == tuple(map(int, '$want'.split('.')))" \
+            >/dev/null 2>&1; then
             command -v "$candidate"
             return 0
         fi
@@ -35,24 +47,28 @@ find_python311() {
     return 1
 }
 
-venv_ok() {
-    [ -x "$VENV/bin/python" ] &&
-        "$VENV/bin/python" -c 'import sys; assert sys.version_info[:2] == (3, 11)' >/dev/null 2>&1
+venv_ok() {  # venv_ok DIR X.Y
+    [ -x "$1/bin/python" ] &&
+        "$1/bin/python" -c "import sys; assert sys.version_info[:2] == tuple(map(int, '$2'.split('.')))" >/dev/null 2>&1
 }
 
-make_venv() {
-    if venv_ok; then
-        say "python: $("$VENV/bin/python" --version) in .venv"
+make_venv() {  # make_venv DIR X.Y
+    local dir="$1" want="$2" py
+    if venv_ok "$dir" "$want"; then
+        say "python: $("$dir/bin/python" --version) in ${dir#"$ROOT"/}"
         return
     fi
-    local py
-    if ! py="$(find_python311)"; then
-        apt_install python3.11 python3.11-venv
-        py="$(find_python311)" || die "Python 3.11 with venv is still missing after apt-get"
+    if ! py="$(find_python "$want")"; then
+        if command -v apt-get >/dev/null && apt-cache show "python$want-venv" >/dev/null 2>&1; then
+            apt_install "python$want" "python$want-venv"
+        fi
+        py="$(find_python "$want")" || die "Python $want is needed for ${dir#"$ROOT"/} and was not found \
+(not as python$want, nor under pyenv, nor in this system's apt packages): install it, e.g. \
+'pyenv install $want', then run this again"
     fi
-    say "creating .venv with $py"
-    rm -rf "$VENV"
-    "$py" -m venv "$VENV"
+    say "creating ${dir#"$ROOT"/} with $py"
+    rm -rf "$dir"
+    "$py" -m venv "$dir"
 }
 
 version_at_least() {  # version_at_least HAVE WANT
@@ -70,17 +86,35 @@ check_rust() {
     say "rust: rustc $have"
 }
 
-install_requirements() {
-    local stamp="$VENV/.requirements.sha256" want
-    want="$(sha256sum requirements.txt | cut -d' ' -f1)"
+install_requirements() {  # install_requirements DIR FILE
+    local dir="$1" file="$2" stamp="$1/.requirements.sha256" want
+    want="$(sha256sum "$file" | cut -d' ' -f1)"
     if [ -f "$stamp" ] && [ "$(cat "$stamp")" = "$want" ]; then
-        say "requirements: up to date"
+        say "requirements: ${dir#"$ROOT"/} up to date"
         return
     fi
-    say "installing requirements.txt"
-    "$VENV/bin/python" -m pip install -q --upgrade pip
-    "$VENV/bin/python" -m pip install -q -r requirements.txt
+    say "installing $file into ${dir#"$ROOT"/}"
+    "$dir/bin/python" -m pip install -q --disable-pip-version-check --upgrade pip
+    "$dir/bin/python" -m pip install -q --disable-pip-version-check -r "$file"
     echo "$want" >"$stamp"
+}
+
+# The Python a requirements-X.Y.txt names on its `# python: A.B` line.
+python_of() {
+    sed -n 's/^# python: *\([0-9.]*\).*/\1/p' "$1" | head -n1
+}
+
+# The second-tier environments: .venv-X.Y for each requirements-X.Y.txt.
+setup_tier2() {
+    local file version python
+    for file in requirements-[0-9]*.txt; do
+        version="${file#requirements-}"
+        version="${version%.txt}"
+        python="$(python_of "$file")"
+        [ -n "$python" ] || die "$file has no '# python: X.Y' line"
+        make_venv "$ROOT/.venv-$version" "$python"
+        install_requirements "$ROOT/.venv-$version" "$file"
+    done
 }
 
 # Hash of everything the compiled module is built from.
@@ -112,8 +146,18 @@ build_engine() {
     echo "$want" >"$stamp"
 }
 
-make_venv
+ALL=0
+case "${1:-}" in
+    "") ;;
+    --all) ALL=1 ;;
+    *) die "usage: scripts/setup.sh [--all]   (--all: also the second-tier Blender versions)" ;;
+esac
+
+make_venv "$VENV" "$PRIMARY_PYTHON"
 check_rust
-install_requirements
+install_requirements "$VENV" requirements.txt
 build_engine
+if [ "$ALL" = 1 ]; then
+    setup_tier2
+fi
 say "done"

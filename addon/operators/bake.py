@@ -303,6 +303,9 @@ def bake_range(context_or_scene, objects, frame_start, frame_end, *, progress=No
     job = BakeJob(context_or_scene, objects, frame_start, frame_end, progress=progress, cancel=cancel,
                   location=location, directory=directory, store_transfer=store_transfer)
     shown = -1.0
+    if fraction is not None:  # 0 first, even when the first step already finishes a frame
+        shown = 0.0
+        fraction(shown)
     try:
         while not job.step(budget_seconds=0.1 if fraction else 0.5):
             if fraction is not None and job.fraction_done > shown:

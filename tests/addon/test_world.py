@@ -42,6 +42,8 @@ def environment_world(scene, image, rotation=None, strength=1.0, mapping_type="P
     """World: [Texture Coordinate -> Mapping ->] Environment Texture -> Background."""
     w = bpy.data.worlds.new("env")
     scene.world = w
+    if bpy.app.version < (5, 0):  # before 5.0 a new World has no node tree until asked
+        w.use_nodes = True
     nodes, links = w.node_tree.nodes, w.node_tree.links
     env = nodes.new("ShaderNodeTexEnvironment")
     env.image = image
@@ -321,6 +323,8 @@ def test_sun_strength_is_the_irradiance_cycles_shows(scene, tmp_path):
     """A white diffuse plane (normal +Z) under a sun 30 degrees off its normal, black world:
     Cycles shows radiance E cos(30) / pi, and the sun's SH lobe predicts the same irradiance."""
     scene.world = bpy.data.worlds.new("black")
+    if bpy.app.version < (5, 0):
+        scene.world.use_nodes = True
     scene.world.node_tree.nodes["Background"].inputs["Strength"].default_value = 0.0
     scene.render.engine = "CYCLES"
     scene.cycles.device = "CPU"
@@ -334,6 +338,8 @@ def test_sun_strength_is_the_irradiance_cycles_shows(scene, tmp_path):
     plane = bpy.data.objects.new("plane", mesh)
     scene.collection.objects.link(plane)
     material = bpy.data.materials.new("white")
+    if bpy.app.version < (5, 0):
+        material.use_nodes = True
     diffuse = material.node_tree.nodes.new("ShaderNodeBsdfDiffuse")
     diffuse.inputs["Color"].default_value = (1, 1, 1, 1)
     material.node_tree.links.new(diffuse.outputs[0], material.node_tree.nodes["Material Output"].inputs["Surface"])
