@@ -20,6 +20,7 @@ ROOT = pathlib.Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 import addon  # noqa: E402
 from addon import engine_bridge, lamps, mesh_io  # noqa: E402
+from spies import count_solves  # noqa: E402
 
 
 @pytest.fixture
@@ -67,14 +68,6 @@ def expected(obj, scene):
     lamp_light = lamps.lamp_irradiance(transfer, points, lamps.scene_lamps(scene))
     irradiance = hemishadow.shade(transfer, lighting) + lamp_light
     return np.asarray(obj.hemishadow.albedo) / math.pi * irradiance
-
-
-def count_solves(monkeypatch):
-    calls = []
-    original = hemishadow.TransferSolver.solve
-    monkeypatch.setattr(hemishadow.TransferSolver, "solve",
-                        lambda self, *a, **k: calls.append(1) or original(self, *a, **k))
-    return calls
 
 
 def add_light(scene, kind, **settings):

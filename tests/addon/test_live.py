@@ -19,6 +19,7 @@ DATA = os.path.join(os.path.dirname(ROOT), "shared", "data")
 sys.path.insert(0, ROOT)
 import addon  # noqa: E402
 from addon import engine_bridge, mesh_io  # noqa: E402
+from spies import count_solves  # noqa: E402
 
 
 # -- helpers -------------------------------------------------------------------------------
@@ -77,18 +78,6 @@ def expected_transfer(obj, count=None):
 
 def expected_radiance(obj, scene, transfer):
     return hemishadow.shade(transfer, engine_bridge.scene_lighting(scene, 5), np.asarray(obj.hemishadow.albedo))
-
-
-def count_solves(monkeypatch):
-    calls = []
-    original = hemishadow.TransferSolver.solve
-
-    def solve(self, *args, **kwargs):
-        calls.append(1)
-        return original(self, *args, **kwargs)
-
-    monkeypatch.setattr(hemishadow.TransferSolver, "solve", solve)
-    return calls
 
 
 def grid_with_box(name="ground"):

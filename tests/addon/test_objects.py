@@ -20,6 +20,7 @@ DATA = os.path.join(os.path.dirname(ROOT), "shared", "data")
 sys.path.insert(0, ROOT)
 import addon  # noqa: E402
 from addon import engine_bridge, mesh_io  # noqa: E402
+from spies import count_solves  # noqa: E402
 
 
 # -- helpers -------------------------------------------------------------------------------
@@ -76,18 +77,6 @@ def import_character(name):
     while root.parent is not None:
         root = root.parent
     return obj, root
-
-
-def count_solves(monkeypatch):
-    calls = []
-    original = hemishadow.TransferSolver.solve
-
-    def solve(self, *args, **kwargs):
-        calls.append(1)
-        return original(self, *args, **kwargs)
-
-    monkeypatch.setattr(hemishadow.TransferSolver, "solve", solve)
-    return calls
 
 
 # -- case 1: mirrored and rotated objects ---------------------------------------------------
