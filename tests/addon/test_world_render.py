@@ -10,35 +10,19 @@ Backgrounds took the first one found.
 import math
 import pathlib
 import sys
-import types
 
 import numpy as np
 import pytest
 
 bpy = pytest.importorskip("bpy")
 import hemishadow  # noqa: E402
-from hemishadow.environment import builtin_hdris  # noqa: E402
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests"))
 from addon import world, world_render  # noqa: E402
 from test_sh import equirect_directions  # noqa: E402
-
-FOREST = builtin_hdris()["forest"]
-
-
-def settings(**overrides):
-    values = dict(world.DEFAULTS, use_sun_lamps=False)
-    values.update(overrides)
-    return types.SimpleNamespace(**values)
-
-
-@pytest.fixture
-def scene():
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    world.clear_cache()
-    return bpy.context.scene
+from test_world import FOREST, scene, settings  # noqa: E402,F401  (scene: the same fixture)
 
 
 def new_world(scene):
