@@ -56,8 +56,6 @@ pub struct Hierarchy {
     pub owned: Vec<u32>,
     /// Each cluster's fine triangles as a compact list.
     pub cluster_compact: Vec<Compact>,
-    /// The most vertices any cluster has (scratch size).
-    pub largest_cluster_vertices: usize,
     /// Clusters each welded vertex sees at full resolution, ascending (CSR like `owned`).
     pub near_start: Vec<u32>,
     pub near: Vec<u32>,
@@ -81,8 +79,7 @@ impl Hierarchy {
         let cluster_compact: Vec<Compact> = (0..coarse.len())
             .map(|c| Compact::new(owned[owned_start[c] as usize..owned_start[c + 1] as usize].iter().map(|&t| fine[t as usize])))
             .collect();
-        let largest_cluster_vertices = cluster_compact.iter().map(|c: &Compact| c.vertices.len()).max().unwrap_or(0);
-        Hierarchy { coarse, group_compact, owned_start, owned, cluster_compact, largest_cluster_vertices, near_start, near }
+        Hierarchy { coarse, group_compact, owned_start, owned, cluster_compact, near_start, near }
     }
 
     pub fn clusters(&self) -> usize {

@@ -12,6 +12,7 @@ pub mod error;
 pub mod hierarchy;
 pub mod integrate;
 pub mod mesh;
+pub mod packets;
 pub mod plane_table;
 pub mod progress;
 pub mod rasterizer;

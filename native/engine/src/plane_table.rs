@@ -119,12 +119,34 @@ impl PlaneTable {
         &self.masks[texel_of(m, self.resolution)]
     }
 
-    /// Texel indices of `LANES` normals given as components (x, y, z), branch-free so that
-    /// the loop vectorises; pair with `mask_at`.
+    /// Texel indices of `LANES` normals given as components (x, y, z), the same as `lookup`'s,
+    /// written so that the loop vectorises: the face by selects, the coordinates clamped in
+    /// float (NaN to 0, as the saturating casts of `texel_of` do) before an unchecked
+    /// conversion. Pair with `mask_at`.
     #[inline(always)]
     pub fn texels<const LANES: usize>(&self, x: &[f32; LANES], y: &[f32; LANES], z: &[f32; LANES], out: &mut [u32; LANES]) {
+        let resolution = self.resolution as u32;
+        let half = 0.5 * self.resolution as f32;
+        let last = (self.resolution - 1) as f32;
         for i in 0..LANES {
-            out[i] = texel_of([x[i], y[i], z[i]], self.resolution) as u32;
+            let (ax, ay, az) = (x[i].abs(), y[i].abs(), z[i].abs());
+            let x_major = ax >= ay && ax >= az;
+            let y_major = !x_major && ay >= az;
+            let major = if x_major { ax } else if y_major { ay } else { az };
+            let along = if x_major { x[i] } else if y_major { y[i] } else { z[i] };
+            let u = if x_major { y[i] } else { x[i] };
+            let v = if x_major || y_major { z[i] } else { y[i] };
+            let axis = if x_major { 0 } else if y_major { 1 } else { 2 };
+            let face = 2 * axis + (along < 0.0) as u32;
+            let scale = half / major;
+            let texel = |w: f32| {
+                let w = w * scale + half;
+                let w = if w > 0.0 { w } else { 0.0 }; // also NaN
+                let w = if w < last { w } else { last };
+                // SAFETY: w is finite and in [0, resolution - 1].
+                unsafe { w.to_int_unchecked::<u32>() }
+            };
+            out[i] = (face * resolution + texel(v)) * resolution + texel(u);
         }
     }
 
@@ -172,6 +194,36 @@ mod tests {
         let table = PlaneTable::shared(16).unwrap();
         let _ = table.lookup([0.0, 0.0, 0.0]);
         let _ = table.lookup([f32::NAN, 1.0, f32::INFINITY]);
+    }
+
+    #[test]
+    fn lane_texels_match_lookup_everywhere() {
+        let table = PlaneTable::shared(16).unwrap();
+        let mut state = 7u64;
+        let mut random = move || {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            ((state >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0) * 3.0
+        };
+        let special = [0.0, -0.0, 1.0, -1.0, 1e-30, f32::NAN, f32::INFINITY, f32::NEG_INFINITY, 0.5, -0.5];
+        let mut normals: Vec<[f32; 3]> = (0..4096).map(|_| [random(), random(), random()]).collect();
+        for &a in &special {
+            for &b in &special {
+                normals.extend([[a, b, 1.0], [1.0, a, b], [a, 1.0, b], [a, b, a], [a, a, b]]);
+            }
+        }
+        // Ties between axes and texel borders.
+        normals.extend((0..64).map(|k| [k as f32 / 8.0 - 4.0, 1.0, k as f32 / 8.0 - 4.0]));
+        for chunk in normals.chunks(8) {
+            let mut xyz = [[0.0f32; 8]; 3];
+            for (i, n) in chunk.iter().enumerate() {
+                (0..3).for_each(|a| xyz[a][i] = n[a]);
+            }
+            let mut out = [0u32; 8];
+            table.texels(&xyz[0], &xyz[1], &xyz[2], &mut out);
+            for (i, n) in chunk.iter().enumerate() {
+                assert_eq!(out[i] as usize, texel_of(*n, 16), "{n:?}");
+            }
+        }
     }
 
     #[test]

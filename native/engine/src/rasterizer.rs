@@ -6,6 +6,8 @@
 //! masks; triangles are OR-ed into the visibility mask in any order (occluder fusion, no depth).
 
 use crate::disk_mask::Mask;
+use crate::integrate::Frame;
+use crate::packets::{Packet, LANES};
 use crate::plane_table::PlaneTable;
 
 #[inline(always)]
@@ -51,33 +53,135 @@ pub fn triangle_mask(table: &PlaneTable, a: [f32; 3], b: [f32; 3], c: [f32; 3]) 
     Some(Mask::and3(table.lookup(ab), table.lookup(bc), table.lookup(ca)))
 }
 
-/// Blocker triangles queued in structure-of-arrays form, rasterized `LANES` at a time so that
-/// the edge planes, the flat-cone test and the table indices of a batch are computed with
-/// vector instructions (Embree-style SoA packets); only the table fetches stay scalar.
-///
-/// The fetches are what the kernel waits on (the 12 MiB table does not stay in cache), so
-/// they are pipelined: a full batch computes its texels and prefetches their masks, then ORs
-/// the previous batch's masks, which have arrived meanwhile. `finish` ORs what is left.
-pub struct TriangleBatch {
-    /// Corner k, component j, lane i: `corners[k][j][i]`.
-    corners: [[[f32; LANES]; 3]; 3],
-    len: usize,
-    /// Texels (edge ab, bc, ca) of the previous batch's kept triangles, prefetched, not OR-ed.
+/// Corners of `LANES` triangles relative to a receiver, in its tangent frame: corner k,
+/// axis j, lane i is `[k][j][i]`.
+pub type LocalCorners = [[[f32; LANES]; 3]; 3];
+
+/// Texels (edge ab, bc, ca) of every lane's three edge planes, and the bit set of lanes whose
+/// cone has a solid angle. Written lane-parallel and branch-free so that it compiles to
+/// vector instructions.
+#[inline(always)]
+fn edge_texels(table: &PlaneTable, corners: &LocalCorners, texels: &mut [[u32; LANES]; 3]) -> u32 {
+    let [a, b, c] = corners;
+    let mut planes = [[[0.0f32; LANES]; 3]; 3]; // edge ab, bc, ca; component; lane
+    let mut solid = [false; LANES];
+    for i in 0..LANES {
+        let (pa, pb, pc) = ([a[0][i], a[1][i], a[2][i]], [b[0][i], b[1][i], b[2][i]], [c[0][i], c[1][i], c[2][i]]);
+        let (ab, bc, ca) = (cross(pa, pb), cross(pb, pc), cross(pc, pa));
+        let det = dot(ab, pc);
+        // Orient the edge planes so that the opposite vertex is on their positive side.
+        let flip = if det < 0.0 { -1.0 } else { 1.0 };
+        solid[i] = det * det > FLAT_CONE_SQUARED * (dot(pa, pa) * dot(pb, pb) * dot(pc, pc)); // false for NaN
+        for j in 0..3 {
+            planes[0][j][i] = flip * ab[j];
+            planes[1][j][i] = flip * bc[j];
+            planes[2][j][i] = flip * ca[j];
+        }
+    }
+    for e in 0..3 {
+        table.texels(&planes[e][0], &planes[e][1], &planes[e][2], &mut texels[e]);
+    }
+    lane_bits(&solid)
+}
+
+#[inline(always)]
+fn lane_bits(lanes: &[bool; LANES]) -> u32 {
+    lanes.iter().enumerate().fold(0, |bits, (i, &on)| bits | (on as u32) << i)
+}
+
+/// ORs triangles into a mask with the table fetches pipelined: the fetches are what the
+/// kernel waits on, so the masks of one packet are prefetched when its texels are known and
+/// OR-ed only when the next packet's texels are (or at `drain`), by which time they have
+/// arrived.
+#[derive(Default)]
+pub struct Pipeline {
+    /// Texels of the previous packet's kept triangles: prefetched, not yet OR-ed.
     pending: [[u32; 3]; LANES],
     pending_len: usize,
 }
 
-pub const LANES: usize = 8;
+impl Pipeline {
+    /// Prefetches the masks of the `lanes` of `texels`, ORs the pending ones into `mask` and
+    /// makes these pending.
+    #[inline(always)]
+    fn advance(&mut self, table: &PlaneTable, texels: &[[u32; LANES]; 3], lanes: u32, mask: &mut Mask) {
+        let mut next = [[0u32; 3]; LANES];
+        let mut next_len = 0;
+        let mut bits = lanes;
+        while bits != 0 {
+            let i = bits.trailing_zeros() as usize;
+            bits &= bits - 1;
+            next[next_len] = [texels[0][i], texels[1][i], texels[2][i]];
+            next[next_len].iter().for_each(|&t| table.prefetch(t));
+            next_len += 1;
+        }
+        self.drain(table, mask);
+        self.pending = next;
+        self.pending_len = next_len;
+    }
 
-impl Default for TriangleBatch {
-    fn default() -> Self {
-        TriangleBatch { corners: [[[0.0; LANES]; 3]; 3], len: 0, pending: [[0; 3]; LANES], pending_len: 0 }
+    /// ORs every pending triangle into `mask`.
+    #[inline(always)]
+    pub fn drain(&mut self, table: &PlaneTable, mask: &mut Mask) {
+        for [ab, bc, ca] in &self.pending[..self.pending_len] {
+            mask.or_assign(&Mask::and3(table.mask_at(*ab), table.mask_at(*bc), table.mask_at(*ca)));
+        }
+        self.pending_len = 0;
+    }
+
+    /// Rasterizes the lanes of `packet` set in `lanes` for a receiver at `origin` with tangent
+    /// frame `frame`, except triangles with a corner `exclude` (the receiver's own vertex) and
+    /// triangles wholly below the horizon. Returns how many were rasterized. Call `drain`
+    /// before reading `mask`.
+    #[inline(always)]
+    pub fn rasterize_packet(
+        &mut self,
+        table: &PlaneTable,
+        origin: [f32; 3],
+        frame: &Frame,
+        packet: &Packet,
+        lanes: u32,
+        exclude: u32,
+        mask: &mut Mask,
+    ) -> u32 {
+        let mut local: LocalCorners = [[[0.0; LANES]; 3]; 3];
+        for k in 0..3 {
+            let [x, y, z] = &packet.corners[k];
+            for i in 0..LANES {
+                let d = [x[i] - origin[0], y[i] - origin[1], z[i] - origin[2]];
+                local[k][0][i] = dot(d, frame.t);
+                local[k][1][i] = dot(d, frame.b);
+                local[k][2][i] = dot(d, frame.n);
+            }
+        }
+        let mut candidate = [false; LANES];
+        for i in 0..LANES {
+            let above = local[0][2][i] > 0.0 || local[1][2][i] > 0.0 || local[2][2][i] > 0.0;
+            let own = packet.ids[0][i] == exclude || packet.ids[1][i] == exclude || packet.ids[2][i] == exclude;
+            candidate[i] = above && !own;
+        }
+        let candidates = lane_bits(&candidate) & lanes & packet.lanes;
+        if candidates == 0 {
+            return 0;
+        }
+        let mut texels = [[0u32; LANES]; 3];
+        let solid = edge_texels(table, &local, &mut texels);
+        self.advance(table, &texels, candidates & solid, mask);
+        candidates.count_ones()
     }
 }
 
+/// Triangles given one at a time (local coordinates, at least one corner above the horizon),
+/// queued into a lane group and rasterized through the pipeline `LANES` at a time.
+#[derive(Default)]
+pub struct TriangleBatch {
+    corners: LocalCorners,
+    len: usize,
+    pipeline: Pipeline,
+}
+
 impl TriangleBatch {
-    /// Queues a triangle (local coordinates, at least one corner above the horizon); full
-    /// batches go through the pipeline into `mask`.
+    /// Queues a triangle; full batches go through the pipeline into `mask`.
     #[inline(always)]
     pub fn push(&mut self, table: &PlaneTable, a: [f32; 3], b: [f32; 3], c: [f32; 3], mask: &mut Mask) {
         let i = self.len;
@@ -96,53 +200,16 @@ impl TriangleBatch {
     #[inline(always)]
     pub fn finish(&mut self, table: &PlaneTable, mask: &mut Mask) {
         self.flush(table, mask);
-        self.or_pending(table, mask);
+        self.pipeline.drain(table, mask);
     }
 
-    /// Texels of the queued triangles are computed and prefetched, the previous batch is OR-ed
-    /// into `mask`, and the queued ones become the pending batch.
     #[inline(always)]
     fn flush(&mut self, table: &PlaneTable, mask: &mut Mask) {
-        let [a, b, c] = &self.corners;
-        let mut planes = [[[0.0f32; LANES]; 3]; 3]; // edge ab, bc, ca; component; lane
-        let mut keep = [false; LANES];
-        for i in 0..LANES {
-            let (pa, pb, pc) = ([a[0][i], a[1][i], a[2][i]], [b[0][i], b[1][i], b[2][i]], [c[0][i], c[1][i], c[2][i]]);
-            let (ab, bc, ca) = (cross(pa, pb), cross(pb, pc), cross(pc, pa));
-            let det = dot(ab, pc);
-            let flip = if det < 0.0 { -1.0 } else { 1.0 };
-            keep[i] = det * det > FLAT_CONE_SQUARED * (dot(pa, pa) * dot(pb, pb) * dot(pc, pc));
-            for j in 0..3 {
-                planes[0][j][i] = flip * ab[j];
-                planes[1][j][i] = flip * bc[j];
-                planes[2][j][i] = flip * ca[j];
-            }
-        }
         let mut texels = [[0u32; LANES]; 3];
-        for e in 0..3 {
-            table.texels(&planes[e][0], &planes[e][1], &planes[e][2], &mut texels[e]);
-        }
-        let mut next = [[0u32; 3]; LANES];
-        let mut next_len = 0;
-        for i in 0..self.len {
-            if keep[i] {
-                next[next_len] = [texels[0][i], texels[1][i], texels[2][i]];
-                next[next_len].iter().for_each(|&t| table.prefetch(t));
-                next_len += 1;
-            }
-        }
-        self.or_pending(table, mask);
-        self.pending = next;
-        self.pending_len = next_len;
+        let solid = edge_texels(table, &self.corners, &mut texels);
+        let queued = (1u32 << self.len) - 1;
+        self.pipeline.advance(table, &texels, solid & queued, mask);
         self.len = 0;
-    }
-
-    #[inline(always)]
-    fn or_pending(&mut self, table: &PlaneTable, mask: &mut Mask) {
-        for [ab, bc, ca] in &self.pending[..self.pending_len] {
-            mask.or_assign(&Mask::and3(table.mask_at(*ab), table.mask_at(*bc), table.mask_at(*ca)));
-        }
-        self.pending_len = 0;
     }
 }
 

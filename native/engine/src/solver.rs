@@ -18,7 +18,8 @@ use crate::integrate::{Brdf, Quadrature};
 use crate::mesh::{check_finite, weld, welded_normals, Normalization, Vec3};
 use crate::progress::{par_rows, Progress};
 use crate::plane_table::PlaneTable;
-use crate::rasterizer::{above_horizon, dot, TriangleBatch};
+use crate::packets::{PacketLists, LANES};
+use crate::rasterizer::Pipeline;
 use crate::sh::ShBasis;
 use crate::transfer::{check_brdf, checked_downsample, checked_offset, welded_views, Receiver, Settings, View};
 
@@ -73,6 +74,10 @@ pub struct Solver {
     normalization: Normalization,
     fine: Vec<[u32; 3]>,
     hierarchy: Hierarchy,
+    /// Per group, its clusters' coarse triangles (lane i of packet p: cluster p * LANES + i).
+    coarse_packets: PacketLists,
+    /// Per cluster, the fine triangles it owns.
+    fine_packets: PacketLists,
     blockers: Blockers,
     brdf: Brdf,
     offset: f32,
@@ -112,12 +117,16 @@ impl Solver {
         let layout = snapped(&mesh.positions, &mesh.triangles);
         let hierarchy = Hierarchy::build(&layout, &mesh.triangles, coarse_target.max(1), blockers.ring);
         let first_copy = mesh.first_copies();
+        let coarse_packets = PacketLists::new(hierarchy.coarse.chunks(GROUP));
+        let fine_packets = PacketLists::new(hierarchy.cluster_compact.iter().map(|c| &c.welded[..]));
         Ok(Solver {
             remap: mesh.remap,
             first_copy,
             normalization,
             fine: mesh.triangles,
             hierarchy,
+            coarse_packets,
+            fine_packets,
             blockers,
             brdf: settings.brdf,
             offset,
@@ -161,6 +170,8 @@ impl Solver {
             + (h.owned_start.len() + h.owned.len() + h.near_start.len() + h.near.len()) * 4
             + h.group_compact.iter().map(compact).sum::<usize>()
             + h.cluster_compact.iter().map(compact).sum::<usize>()
+            + self.coarse_packets.bytes()
+            + self.fine_packets.bytes()
             + last
     }
 
@@ -189,6 +200,8 @@ impl Solver {
         let positions = self.normalization.apply_all(self.first_copy.iter().map(|&i| vertices[i as usize]));
         let normals = welded_normals(&positions, &self.fine, &self.remap, normals)?;
         let views = welded_views(&self.first_copy, self.remap.len(), self.brdf, view)?;
+        self.coarse_packets.update(&positions);
+        self.fine_packets.update(&positions);
         let bounds = self.cluster_bounds(&positions);
         let group_bounds = self.group_bounds(&positions, &bounds);
         let spheres = self.near_spheres(&bounds);
@@ -205,10 +218,10 @@ impl Solver {
         let mut welded = vec![0.0f32; positions.len() * k];
         let blockers = AtomicU64::new(0);
         let reused = reusable.iter().filter(|&&r| r).count();
-        par_rows(&mut welded, k, progress, Vec::new, |r, scratch, out| match (&self.last, reusable[r]) {
+        par_rows(&mut welded, k, progress, || (), |r, _, out| match (&self.last, reusable[r]) {
             (Some(last), true) => out.copy_from_slice(&last.transfer[r * k..(r + 1) * k]),
             _ => {
-                let count = self.receiver(r, &frame, scratch, out);
+                let count = self.receiver(r, &frame, out);
                 blockers.fetch_add(count, Ordering::Relaxed);
             }
         })?;
@@ -289,97 +302,85 @@ impl Solver {
                 let Some(receiver) = Receiver::new(frame.positions[r], frame.normals[r], self.offset) else { return true };
                 moved_groups
                     .iter()
-                    .all(|&g| below_horizon(&receiver, &frame.group_bounds[g]) && below_horizon(&receiver, &last.group_bounds[g]))
+                    .all(|&g| receiver.below_horizon(&frame.group_bounds[g]) && receiver.below_horizon(&last.group_bounds[g]))
             })
             .collect()
     }
 
     /// Transfer of welded receiver `r` into `out`; returns the number of blockers rasterized.
     /// The hot loop is compiled twice, for AVX2 + FMA and for the baseline, and picked at run time.
-    fn receiver(&self, r: usize, frame: &Frame, scratch: &mut Vec<Vec3>, out: &mut [f32]) -> u64 {
+    fn receiver(&self, r: usize, frame: &Frame, out: &mut [f32]) -> u64 {
         #[cfg(target_arch = "x86_64")]
         if std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma") {
             // SAFETY: the CPU supports the features the function is compiled for.
-            return unsafe { self.receiver_avx2(r, frame, scratch, out) };
+            return unsafe { self.receiver_avx2(r, frame, out) };
         }
-        self.receiver_portable(r, frame, scratch, out)
+        self.receiver_portable(r, frame, out)
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
-    unsafe fn receiver_avx2(&self, r: usize, frame: &Frame, scratch: &mut Vec<Vec3>, out: &mut [f32]) -> u64 {
-        self.receiver_portable(r, frame, scratch, out)
+    unsafe fn receiver_avx2(&self, r: usize, frame: &Frame, out: &mut [f32]) -> u64 {
+        self.receiver_portable(r, frame, out)
     }
 
+    /// Per group of clusters (skipped whole when below the horizon): the coarse triangles of
+    /// the clusters seen from afar, then the fine packets of the clusters seen at full
+    /// resolution (the receiver's ring and clusters close to it), each packet skipped when
+    /// its box is below the horizon.
     #[inline(always)]
-    fn receiver_portable(&self, r: usize, frame: &Frame, scratch: &mut Vec<Vec3>, out: &mut [f32]) -> u64 {
+    fn receiver_portable(&self, r: usize, frame: &Frame, out: &mut [f32]) -> u64 {
         let Some(receiver) = Receiver::new(frame.positions[r], frame.normals[r], self.offset) else {
             out.fill(0.0);
             return 0;
         };
-        let h = &self.hierarchy;
+        let (h, table, origin) = (&self.hierarchy, &*self.table, receiver.origin);
         let mut mask = Mask::EMPTY;
-        let mut batch = TriangleBatch::default();
-        let mut rasterized = 0u64;
-        let r = r as u32;
-        let near = h.near_of(r as usize);
+        let mut pipeline = Pipeline::default();
+        let mut rasterized = 0u32;
+        let near = h.near_of(r);
         let mut next_near = 0;
-        scratch.resize(GROUP * 3 + h.largest_cluster_vertices, [0.0; 3]);
-        let (group_local, cluster_local) = scratch.split_at_mut(GROUP * 3);
-        'groups: for g in 0..h.groups() {
+        for g in 0..h.groups() {
             let first = g * GROUP;
-            if self.blockers.cull && below_horizon(&receiver, &frame.group_bounds[g]) {
-                while next_near < near.len() && (near[next_near] as usize) < first + GROUP {
-                    next_near += 1;
-                }
+            let clusters = (first + GROUP).min(h.clusters()) - first;
+            let mut expanded = 0u32;
+            while next_near < near.len() && (near[next_near] as usize) < first + clusters {
+                expanded |= 1 << (near[next_near] as usize - first);
+                next_near += 1;
+            }
+            if self.blockers.cull && receiver.below_horizon(&frame.group_bounds[g]) {
                 continue;
             }
-            let group = &h.group_compact[g];
-            if self.blockers.hierarchy {
-                to_local_all(&receiver, frame.positions, &group.vertices, &mut group_local[..group.vertices.len()]);
+            if !self.blockers.hierarchy {
+                expanded = (1 << clusters) - 1;
+            } else {
+                expanded |= close_clusters(&receiver, &frame.spheres[first..first + clusters]);
+                for (p, packet) in self.coarse_packets.of(g).iter().enumerate() {
+                    let far = !expanded >> (p * LANES);
+                    rasterized += pipeline.rasterize_packet(table, origin, &receiver.frame, packet, far, r as u32, &mut mask);
+                }
             }
-            for (i, c) in (first..(first + GROUP).min(h.clusters())).enumerate() {
-                let in_ring = next_near < near.len() && near[next_near] == c as u32;
-                next_near += in_ring as usize;
-                let is_near = in_ring || close_to(&receiver, &frame.spheres[c]);
-                if self.blockers.hierarchy && !is_near {
-                    if !group.welded[i].contains(&r) {
-                        let [a, b, cc] = group.triangles[i].map(|v| group_local[v as usize]);
-                        rasterized += self.rasterize(&mut batch, a, b, cc, &mut mask) as u64;
-                    }
+            let mut bits = expanded;
+            while bits != 0 {
+                let c = first + bits.trailing_zeros() as usize;
+                bits &= bits - 1;
+                if self.blockers.cull && receiver.below_horizon(&frame.bounds[c]) {
                     continue;
                 }
-                if self.blockers.cull && below_horizon(&receiver, &frame.bounds[c]) {
-                    continue;
-                }
-                let cluster = &h.cluster_compact[c];
-                let local = &mut cluster_local[..cluster.vertices.len()];
-                to_local_all(&receiver, frame.positions, &cluster.vertices, local);
-                for (tri, welded) in cluster.triangles.iter().zip(&cluster.welded) {
-                    if !welded.contains(&r) {
-                        let [a, b, cc] = tri.map(|v| local[v as usize]);
-                        rasterized += self.rasterize(&mut batch, a, b, cc, &mut mask) as u64;
+                for packet in self.fine_packets.of(c) {
+                    if !(self.blockers.cull && receiver.clearly_below_horizon(&packet.bounds)) {
+                        rasterized += pipeline.rasterize_packet(table, origin, &receiver.frame, packet, u32::MAX, r as u32, &mut mask);
                     }
                 }
             }
             if mask == self.disk {
-                break 'groups;
+                break;
             }
         }
-        batch.finish(&self.table, &mut mask);
-        let view = frame.views.map_or(receiver.frame.n, |v| v[r as usize]);
+        pipeline.drain(table, &mut mask);
+        let view = frame.views.map_or(receiver.frame.n, |v| v[r]);
         self.quadrature.integrate(&mask, &receiver.frame, self.brdf, view, out);
-        rasterized
-    }
-
-    /// Queues a triangle for the rasterizer unless it lies below the horizon; true if queued.
-    #[inline(always)]
-    fn rasterize(&self, batch: &mut TriangleBatch, a: Vec3, b: Vec3, c: Vec3, mask: &mut Mask) -> bool {
-        if !above_horizon(a, b, c) {
-            return false;
-        }
-        batch.push(&self.table, a, b, c, mask);
-        true
+        rasterized as u64
     }
 }
 
@@ -394,17 +395,14 @@ fn snapped(positions: &[Vec3], triangles: &[[u32; 3]]) -> Vec<Vec3> {
     positions.iter().zip(used).map(|(p, used)| if used { snap(p) } else { [0.0; 3] }).collect()
 }
 
+/// Bit i set when cluster i's near sphere contains the receiver.
 #[inline(always)]
-fn to_local_all(receiver: &Receiver, positions: &[Vec3], vertices: &[u32], out: &mut [Vec3]) {
-    for (o, &v) in out.iter_mut().zip(vertices) {
-        *o = receiver.to_local(positions[v as usize]);
-    }
-}
-
-#[inline(always)]
-fn close_to(receiver: &Receiver, sphere: &[f32; 4]) -> bool {
-    let d = [0, 1, 2].map(|a| sphere[a] - receiver.origin[a]);
-    d[0] * d[0] + d[1] * d[1] + d[2] * d[2] < sphere[3]
+fn close_clusters(receiver: &Receiver, spheres: &[[f32; 4]]) -> u32 {
+    let o = receiver.origin;
+    spheres.iter().enumerate().fold(0, |bits, (i, s)| {
+        let d = [s[0] - o[0], s[1] - o[1], s[2] - o[2]];
+        bits | ((d[0] * d[0] + d[1] * d[1] + d[2] * d[2] < s[3]) as u32) << i
+    })
 }
 
 fn bounds_of(points: impl Iterator<Item = Vec3>) -> [Vec3; 2] {
@@ -416,13 +414,4 @@ fn bounds_of(points: impl Iterator<Item = Vec3>) -> [Vec3; 2] {
         }
     }
     b
-}
-
-/// Whether a box lies entirely on or below the receiver's tangent plane.
-#[inline(always)]
-fn below_horizon(receiver: &Receiver, bounds: &[Vec3; 2]) -> bool {
-    let n = receiver.frame.n;
-    // The box corner farthest along n.
-    let top = [0, 1, 2].map(|a| if n[a] >= 0.0 { bounds[1][a] } else { bounds[0][a] });
-    dot(n, top) <= dot(n, receiver.origin)
 }

@@ -8,7 +8,8 @@ use crate::integrate::{Brdf, Frame, Quadrature};
 use crate::mesh::{mean_edge_length, normalize, tangent_frame, weld, welded_normals, Vec3, WeldedMesh};
 use crate::plane_table::{PlaneTable, DEFAULT_RESOLUTION};
 use crate::progress::{par_rows, Progress};
-use crate::rasterizer::{dot, triangle_mask};
+use crate::packets::PacketLists;
+use crate::rasterizer::{dot, triangle_mask, Pipeline};
 use crate::sh::ShBasis;
 
 /// Where glossy receivers are seen from.
@@ -70,6 +71,8 @@ pub struct Output {
 /// Everything a receiver needs, shared by all threads.
 struct Scene<'a> {
     mesh: &'a WeldedMesh,
+    /// Every triangle, in packets.
+    packets: PacketLists,
     normals: &'a [Vec3],
     views: Option<Vec<Vec3>>,
     offset: f32,
@@ -102,8 +105,11 @@ pub fn transfer_with_progress(
     let views = welded_views(&mesh.first_copies(), mesh.remap.len(), settings.brdf, settings.view.as_ref())?;
     let offset = checked_offset(settings.offset, &mesh, normalization.scale())?;
     let table = PlaneTable::shared(settings.table_resolution)?;
+    let mut packets = PacketLists::new(std::iter::once(&mesh.triangles[..]));
+    packets.update(&mesh.positions);
     let scene = Scene {
         mesh: &mesh,
+        packets,
         normals: &normals,
         views,
         offset,
@@ -113,10 +119,9 @@ pub fn transfer_with_progress(
         disk: disk(),
     };
     let k = scene.quadrature.basis().coeffs();
-    let scratch = || vec![[0.0f32; 3]; mesh.positions.len()];
     let Some(receivers) = receivers else {
         let mut welded = vec![0.0f32; mesh.positions.len() * k];
-        par_rows(&mut welded, k, progress, scratch, |r, local, out| scene.receiver(r, local, out))?;
+        par_rows(&mut welded, k, progress, || (), |r, _, out| scene.receiver(r, out))?;
         let transfer = mesh.remap.iter().flat_map(|&w| welded[w as usize * k..(w as usize + 1) * k].iter().copied()).collect();
         let missing_normals = mesh.remap.iter().filter(|&&w| normals[w as usize] == [0.0; 3]).count();
         return Ok(Output { coeffs: k, transfer, missing_normals });
@@ -126,7 +131,7 @@ pub fn transfer_with_progress(
     }
     let rows: Vec<usize> = receivers.iter().map(|&i| mesh.remap[i as usize] as usize).collect();
     let mut transfer = vec![0.0f32; rows.len() * k];
-    par_rows(&mut transfer, k, progress, scratch, |i, local, out| scene.receiver(rows[i], local, out))?;
+    par_rows(&mut transfer, k, progress, || (), |i, _, out| scene.receiver(rows[i], out))?;
     let missing_normals = rows.iter().filter(|&&w| normals[w] == [0.0; 3]).count();
     Ok(Output { coeffs: k, transfer, missing_normals })
 }
@@ -201,40 +206,71 @@ impl Receiver {
         let d = [v[0] - self.origin[0], v[1] - self.origin[1], v[2] - self.origin[2]];
         [dot(d, self.frame.t), dot(d, self.frame.b), dot(d, self.frame.n)]
     }
+
+    /// Whether a box lies entirely on or below the receiver's tangent plane.
+    #[inline(always)]
+    pub fn below_horizon(&self, bounds: &[Vec3; 2]) -> bool {
+        dot(self.frame.n, self.highest_corner(bounds)) <= dot(self.frame.n, self.origin)
+    }
+
+    /// `below_horizon` with a margin far above rounding: every point of the box is then below
+    /// the horizon in the receiver's local coordinates too, so skipping it changes no result.
+    #[inline(always)]
+    pub fn clearly_below_horizon(&self, bounds: &[Vec3; 2]) -> bool {
+        dot(self.frame.n, self.highest_corner(bounds)) < dot(self.frame.n, self.origin) - 1e-5
+    }
+
+    /// The box corner farthest along the normal.
+    #[inline(always)]
+    fn highest_corner(&self, bounds: &[Vec3; 2]) -> Vec3 {
+        [0, 1, 2].map(|a| if self.frame.n[a] >= 0.0 { bounds[1][a] } else { bounds[0][a] })
+    }
 }
 
 impl Scene<'_> {
-    /// Transfer of welded vertex `r`; `local` is scratch for the mesh in its tangent frame.
-    fn receiver(&self, r: usize, local: &mut [Vec3], out: &mut [f32]) {
+    /// Transfer of welded vertex `r`.
+    fn receiver(&self, r: usize, out: &mut [f32]) {
+        #[cfg(target_arch = "x86_64")]
+        if std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma") {
+            // SAFETY: the CPU supports the features the function is compiled for.
+            return unsafe { self.receiver_avx2(r, out) };
+        }
+        self.receiver_portable(r, out)
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    unsafe fn receiver_avx2(&self, r: usize, out: &mut [f32]) {
+        self.receiver_portable(r, out)
+    }
+
+    #[inline(always)]
+    fn receiver_portable(&self, r: usize, out: &mut [f32]) {
         let Some(receiver) = Receiver::new(self.mesh.positions[r], self.normals[r], self.offset) else {
             out.fill(0.0);
             return;
         };
-        for (l, v) in local.iter_mut().zip(&self.mesh.positions) {
-            *l = receiver.to_local(*v);
-        }
-        let mask = self.visibility(r as u32, local);
+        let mask = self.visibility(r as u32, &receiver);
         let view = self.views.as_ref().map_or(receiver.frame.n, |v| v[r]);
         self.quadrature.integrate(&mask, &receiver.frame, self.brdf, view, out);
     }
 
     /// The receiver's visibility mask: every triangle but its own incident ones.
-    fn visibility(&self, r: u32, local: &[Vec3]) -> Mask {
+    #[inline(always)]
+    fn visibility(&self, r: u32, receiver: &Receiver) -> Mask {
         let mut mask = Mask::EMPTY;
-        for chunk in self.mesh.triangles.chunks(64) {
-            for tri in chunk {
-                if tri.contains(&r) {
-                    continue;
-                }
-                let [a, b, c] = tri.map(|i| local[i as usize]);
-                if let Some(covered) = triangle_mask(self.table, a, b, c) {
-                    mask.or_assign(&covered);
+        let mut pipeline = Pipeline::default();
+        for chunk in self.packets.packets.chunks(8) {
+            for packet in chunk {
+                if !receiver.clearly_below_horizon(&packet.bounds) {
+                    pipeline.rasterize_packet(self.table, receiver.origin, &receiver.frame, packet, u32::MAX, r, &mut mask);
                 }
             }
             if mask == self.disk {
-                break; // fully occluded: nothing more can change
+                return mask; // fully occluded: nothing more can change
             }
         }
+        pipeline.drain(self.table, &mut mask);
         mask
     }
 }

@@ -1,0 +1,59 @@
+//! Times `Solver::solve` on a mesh dumped by bench/dump_mesh.py (u32 frames, vertices,
+//! triangles; f32 frames x vertices x 3; u32 triangles x 3), for profiling without Python:
+//!
+//!     cargo run --release --example profile_solver -- mesh.bin [downsample] [table] [near_scale] [coarse triangles]
+
+use std::time::Instant;
+
+use hemishadow_engine::{Blockers, Settings, Solver};
+
+fn read_mesh(path: &str) -> (Vec<Vec<[f32; 3]>>, Vec<[u32; 3]>) {
+    let bytes = std::fs::read(path).expect("mesh file");
+    let word = |i: usize| u32::from_le_bytes(bytes[4 * i..4 * i + 4].try_into().unwrap());
+    let (frames, vertices, triangles) = (word(0) as usize, word(1) as usize, word(2) as usize);
+    let float = |i: usize| f32::from_le_bytes(bytes[4 * i..4 * i + 4].try_into().unwrap());
+    let positions = (0..frames)
+        .map(|f| (0..vertices).map(|v| [0, 1, 2].map(|a| float(3 + (f * vertices + v) * 3 + a))).collect())
+        .collect();
+    let base = 3 + frames * vertices * 3;
+    let tris = (0..triangles).map(|t| [0, 1, 2].map(|a| word(base + 3 * t + a))).collect();
+    (positions, tris)
+}
+
+/// CPU time of this process (all threads), in ms: robust to other load on a shared machine.
+fn cpu_ms() -> f64 {
+    let stat = std::fs::read_to_string("/proc/self/stat").unwrap_or_default();
+    let fields: Vec<&str> = stat.rsplit(')').next().unwrap_or("").split_whitespace().collect();
+    let ticks = |i: usize| fields.get(i).and_then(|f| f.parse::<f64>().ok()).unwrap_or(0.0);
+    (ticks(11) + ticks(12)) * 10.0 // utime, stime in 1/100 s
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    let (frames, triangles) = read_mesh(&args[1]);
+    let arg = |i: usize| args.get(i).map(|s| s.parse::<f32>().unwrap());
+    let settings = Settings {
+        downsample: arg(2).map(|d| d as usize),
+        table_resolution: arg(3).map_or(Settings::default().table_resolution, |t| t as usize),
+        ..Settings::default()
+    };
+    let blockers = Blockers { reuse: false, coarse_triangles: arg(5).map(|c| c as usize), near_scale: arg(4).unwrap_or(Blockers::default().near_scale), ..Blockers::default() };
+    let mut solver = Solver::new(&frames[0], &triangles, &settings, blockers).unwrap();
+    solver.solve(&frames[1], None, None).unwrap();
+    let mut times = Vec::new();
+    let start = Instant::now();
+    let cpu_start = cpu_ms();
+    while times.len() < 5 || (start.elapsed().as_secs_f32() < 5.0 && times.len() < 100) {
+        let frame = &frames[1 + times.len() % (frames.len() - 1)];
+        let t = Instant::now();
+        solver.solve(frame, None, None).unwrap();
+        times.push(t.elapsed().as_secs_f64() * 1e3);
+    }
+    let cpu_per_solve = (cpu_ms() - cpu_start) / times.len() as f64;
+    times.sort_by(f64::total_cmp);
+    let stats = solver.stats();
+    println!(
+        "{}: {} vertices, {:.2} ms median over {} solves ({:.1} CPU ms per solve), {:.0} blockers per receiver",
+        args[1], frames[0].len(), times[times.len() / 2], times.len(), cpu_per_solve, stats.blockers_per_receiver
+    );
+}
