@@ -66,11 +66,18 @@ def frame_jumps(series, actions):
     return np.abs(np.diff(series, axis=0))[same]
 
 
+@pytest.fixture(scope="module")
+def exact_animations(animations):
+    """Per character, the exact path's AO on every frame, (F, V)."""
+    return {name: np.array([ao(hemishadow.transfer(v, triangles, bands=BANDS)) for _, _, v in frames])
+            for name, (triangles, frames) in animations.items()}
+
+
 @pytest.mark.parametrize("name", ["cesium_man.glb", "fox.glb", "rigged_figure.glb"])
-def test_animation_follows_the_exact_path(animations, name):
+def test_animation_follows_the_exact_path(animations, exact_animations, name):
     triangles, frames = animations[name]
     solver = hemishadow.TransferSolver(frames[0][2], triangles, bands=BANDS)
-    exact = np.array([ao(hemishadow.transfer(v, triangles, bands=BANDS)) for _, _, v in frames])
+    exact = exact_animations[name]
     solved = np.array([ao(solver.solve(v)) for _, _, v in frames])
     worst = np.abs(solved - exact).max()
     actions = [a for a, _, _ in frames]
@@ -81,6 +88,51 @@ def test_animation_follows_the_exact_path(animations, name):
     assert worst <= 0.1
     assert (jumps_solved > 0.2).sum() <= (jumps_exact > 0.2).sum()
     assert jumps_solved.max() <= jumps_exact.max() + 0.05
+
+
+@pytest.mark.parametrize("name", ["cesium_man.glb", "fox.glb", "rigged_figure.glb"])
+def test_potentially_visible_sets_keep_the_bound(animations, exact_animations, name):
+    """PVS from every 4th frame: sampled frames give exactly the full hierarchy's result, every
+    frame stays within 0.1 AO of the exact path, and frames far from the samples fall back."""
+    triangles, frames = animations[name]
+    poses = np.array([v for _, _, v in frames])
+    full = hemishadow.TransferSolver(poses[0], triangles, bands=BANDS, reuse=False)
+    pvs = hemishadow.TransferSolver(poses[0], triangles, bands=BANDS, reuse=False)
+    sampled = list(range(0, len(poses), 4))
+    pvs.build_pvs(poses[sampled])
+    worst, used, fewer = 0.0, 0, []
+    for f, v in enumerate(poses):
+        expected, got = full.solve(v), pvs.solve(v)
+        if f in sampled:
+            assert pvs.stats["pvs"]
+            np.testing.assert_array_equal(got, expected)
+        used += pvs.stats["pvs"]
+        if pvs.stats["pvs"]:
+            fewer.append(pvs.stats["blockers_per_vertex"] / full.stats["blockers_per_vertex"])
+        worst = max(worst, np.abs(ao(got) - exact_animations[name][f]).max())
+    print(f"\n{name}: PVS used on {used} of {len(poses)} frames, blockers x{np.mean(fewer):.2f}, "
+          f"max |dAO| vs exact {worst:.4f}")
+    assert worst <= 0.1
+    assert np.mean(fewer) < {"cesium_man.glb": 0.8, "fox.glb": 0.95, "rigged_figure.glb": 1.0}[name]
+    far = poses[0] + np.array([0.0, 0.0, 0.5]) * np.ptp(poses[0], axis=0).max() * np.sin(poses[0][:, :1] * 40.0)
+    pvs.solve(far)
+    assert not pvs.stats["pvs"]
+
+
+def test_pvs_input_is_checked():
+    v, t = as_engine(MESHES["spot"])
+    solver = hemishadow.TransferSolver(v, t, bands=BANDS)
+    with pytest.raises(ValueError, match="shape"):
+        solver.build_pvs(v)
+    with pytest.raises(ValueError, match="finite"):
+        solver.build_pvs(np.full((1,) + v.shape, np.nan, np.float32))
+    with pytest.raises(ValueError, match="tolerance"):
+        solver.build_pvs(v[None], tolerance=-1.0)
+    assert solver.pvs is None
+    solver.build_pvs(v[None])
+    assert solver.pvs["poses"] == 1 and solver.pvs["clusters_per_vertex"] > 0
+    solver.clear_pvs()
+    assert solver.pvs is None
 
 
 @pytest.mark.parametrize("name", ["spot", "teapot", "rolled_sheet", "cesium_man"])

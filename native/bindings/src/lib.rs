@@ -226,10 +226,35 @@ impl PySolver {
         Ok(matrix(values, n, k, py))
     }
 
-    /// (blockers per computed receiver, receivers computed, receivers reused) of the last solve.
-    fn stats(&self) -> (f64, usize, usize) {
+    /// (blockers per computed receiver, receivers computed, receivers reused, PVS used) of the
+    /// last solve.
+    fn stats(&self) -> (f64, usize, usize, bool) {
         let s = self.inner.stats();
-        (s.blockers_per_receiver, s.computed, s.reused)
+        (s.blockers_per_receiver, s.computed, s.reused, s.used_pvs)
+    }
+
+    /// Samples poses (F, N, 3) for potentially visible sets.
+    fn build_pvs(&mut self, py: Python<'_>, poses: PyReadonlyArray3<f32>, tolerance: f32, progress: Option<Py<PyAny>>) -> PyResult<()> {
+        let view = poses.as_array();
+        if view.shape()[2] != 3 {
+            return Err(PyValueError::new_err(format!("poses must have shape (F, N, 3), got {:?}", view.shape())));
+        }
+        let poses: Vec<Vec<[f32; 3]>> = view.outer_iter().map(|pose| pose.rows().into_iter().map(|r| [r[0], r[1], r[2]]).collect()).collect();
+        let slices: Vec<&[[f32; 3]]> = poses.iter().map(Vec::as_slice).collect();
+        let inner = &mut self.inner;
+        let mut reporter = PyProgress::new(progress);
+        let report = &mut reporter;
+        let result = run(py, || inner.build_pvs(&slices, tolerance, &mut |f| report.report(f)));
+        reporter.finish(result)
+    }
+
+    fn clear_pvs(&mut self) {
+        self.inner.clear_pvs();
+    }
+
+    /// (sampled poses, clusters kept per vertex, tolerance), or None without a PVS.
+    fn pvs_info(&self) -> Option<(usize, f64, f32)> {
+        self.inner.pvs().map(|p| (p.poses(), p.clusters_per_vertex(), p.tolerance))
     }
 
     #[getter]

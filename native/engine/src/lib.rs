@@ -15,6 +15,7 @@ pub mod mesh;
 pub mod packets;
 pub mod plane_table;
 pub mod progress;
+pub mod pvs;
 pub mod rasterizer;
 pub mod sh;
 pub mod sh_rotation;

@@ -17,6 +17,7 @@ use crate::hierarchy::{default_coarse_triangles, Hierarchy, GROUP};
 use crate::integrate::{Brdf, Quadrature};
 use crate::mesh::{check_finite, weld, welded_normals, Normalization, Vec3};
 use crate::progress::{par_rows, Progress};
+use crate::pvs::{contributing, Pvs};
 use crate::plane_table::PlaneTable;
 use crate::packets::{PacketLists, LANES};
 use crate::rasterizer::Pipeline;
@@ -57,6 +58,8 @@ pub struct Stats {
     pub blockers_per_receiver: f64,
     pub computed: usize,
     pub reused: usize,
+    /// Whether the frame was close enough to the sampled poses to use the PVS.
+    pub used_pvs: bool,
 }
 
 struct LastFrame {
@@ -64,6 +67,7 @@ struct LastFrame {
     normals: Vec<Vec3>,
     views: Option<Vec<Vec3>>,
     group_bounds: Vec<[Vec3; 2]>,
+    used_pvs: bool,
     transfer: Vec<f32>,
 }
 
@@ -85,19 +89,22 @@ pub struct Solver {
     quadrature: Quadrature,
     disk: Mask,
     last: Option<LastFrame>,
+    pvs: Option<Pvs>,
     stats: Stats,
 }
 
-/// One frame's data shared by the receivers.
-struct Frame<'a> {
-    positions: &'a [Vec3],
-    normals: &'a [Vec3],
-    views: Option<&'a [Vec3]>,
-    /// Bounding boxes of clusters, then of groups.
-    bounds: &'a [[Vec3; 2]],
+/// One frame's data shared by the receivers (welded, normalised).
+struct Frame {
+    positions: Vec<Vec3>,
+    normals: Vec<Vec3>,
+    views: Option<Vec<Vec3>>,
+    /// Bounding boxes of clusters.
+    bounds: Vec<[Vec3; 2]>,
     /// Per cluster, the centre of its box and (near_scale x half its diagonal)^2.
-    spheres: &'a [[f32; 4]],
-    group_bounds: &'a [[Vec3; 2]],
+    spheres: Vec<[f32; 4]>,
+    group_bounds: Vec<[Vec3; 2]>,
+    /// Whether receivers see through their potentially visible sets.
+    use_pvs: bool,
 }
 
 impl Solver {
@@ -134,6 +141,7 @@ impl Solver {
             quadrature: Quadrature::new(downsample, basis),
             disk: disk(),
             last: None,
+            pvs: None,
             stats: Stats::default(),
         })
     }
@@ -172,6 +180,7 @@ impl Solver {
             + h.cluster_compact.iter().map(compact).sum::<usize>()
             + self.coarse_packets.bytes()
             + self.fine_packets.bytes()
+            + self.pvs.as_ref().map_or(0, Pvs::bytes)
             + last
     }
 
@@ -196,26 +205,10 @@ impl Solver {
                 vertices.len()
             )));
         }
-        check_finite(vertices, "vertex")?;
-        let positions = self.normalization.apply_all(self.first_copy.iter().map(|&i| vertices[i as usize]));
-        let normals = welded_normals(&positions, &self.fine, &self.remap, normals)?;
-        let views = welded_views(&self.first_copy, self.remap.len(), self.brdf, view)?;
-        self.coarse_packets.update(&positions);
-        self.fine_packets.update(&positions);
-        let bounds = self.cluster_bounds(&positions);
-        let group_bounds = self.group_bounds(&positions, &bounds);
-        let spheres = self.near_spheres(&bounds);
-        let frame = Frame {
-            positions: &positions,
-            normals: &normals,
-            views: views.as_deref(),
-            bounds: &bounds,
-            spheres: &spheres,
-            group_bounds: &group_bounds,
-        };
+        let frame = self.prepare(vertices, normals, view)?;
         let reusable = self.reusable_receivers(&frame);
         let k = self.coeffs();
-        let mut welded = vec![0.0f32; positions.len() * k];
+        let mut welded = vec![0.0f32; frame.positions.len() * k];
         let blockers = AtomicU64::new(0);
         let reused = reusable.iter().filter(|&&r| r).count();
         par_rows(&mut welded, k, progress, || (), |r, _, out| match (&self.last, reusable[r]) {
@@ -225,17 +218,127 @@ impl Solver {
                 blockers.fetch_add(count, Ordering::Relaxed);
             }
         })?;
-        let computed = positions.len() - reused;
+        let computed = frame.positions.len() - reused;
         self.stats = Stats {
             blockers_per_receiver: blockers.into_inner() as f64 / computed.max(1) as f64,
             computed,
             reused,
+            used_pvs: frame.use_pvs,
         };
         let result = self.remap.iter().flat_map(|&w| welded[w as usize * k..(w as usize + 1) * k].iter().copied()).collect();
         if self.blockers.reuse {
-            self.last = Some(LastFrame { positions, normals, views, group_bounds, transfer: welded });
+            let Frame { positions, normals, views, group_bounds, use_pvs, .. } = frame;
+            self.last = Some(LastFrame { positions, normals, views, group_bounds, used_pvs: use_pvs, transfer: welded });
         }
         Ok(result)
+    }
+
+    /// Checks a frame's input and computes what its receivers share; fills the packets.
+    fn prepare(&mut self, vertices: &[Vec3], normals: Option<&[Vec3]>, view: Option<&View>) -> Result<Frame> {
+        if vertices.len() != self.remap.len() {
+            return Err(Error::invalid(format!(
+                "the solver was built for {} vertices, got {}: the topology changed, build a new solver",
+                self.remap.len(),
+                vertices.len()
+            )));
+        }
+        check_finite(vertices, "vertex")?;
+        let positions = self.normalization.apply_all(self.first_copy.iter().map(|&i| vertices[i as usize]));
+        let normals = welded_normals(&positions, &self.fine, &self.remap, normals)?;
+        let views = welded_views(&self.first_copy, self.remap.len(), self.brdf, view)?;
+        self.coarse_packets.update(&positions);
+        self.fine_packets.update(&positions);
+        let bounds = self.cluster_bounds(&positions);
+        let group_bounds = self.group_bounds(&positions, &bounds);
+        let spheres = self.near_spheres(&bounds);
+        let use_pvs = self.pvs.as_ref().is_some_and(|pvs| pvs.covers(&positions));
+        Ok(Frame { positions, normals, views, bounds, spheres, group_bounds, use_pvs })
+    }
+
+    /// Samples `poses` (input vertices per pose) for potentially visible sets (`pvs.rs`):
+    /// later frames within `tolerance` of one of them rasterize only the clusters that
+    /// contributed to a receiver in some sampled pose. Replaces any earlier sets.
+    pub fn build_pvs(&mut self, poses: &[&[Vec3]], tolerance: f32, progress: Progress) -> Result<()> {
+        if poses.is_empty() {
+            return Err(Error::invalid("build_pvs needs at least one pose"));
+        }
+        if !(tolerance.is_finite() && tolerance >= 0.0) {
+            return Err(Error::invalid(format!("the PVS tolerance must be finite and non-negative, got {tolerance}")));
+        }
+        let (mut per_pose, mut welded_poses) = (Vec::new(), Vec::new());
+        for (p, pose) in poses.iter().enumerate() {
+            let frame = self.prepare(pose, None, None)?;
+            let mut needed: Vec<Vec<u32>> = vec![Vec::new(); frame.positions.len()];
+            let mut fraction = |f: f32| progress((p as f32 + f) / poses.len() as f32);
+            let mut rows = vec![0.0f32; frame.positions.len()];
+            let slots: Vec<std::sync::Mutex<Vec<u32>>> = needed.iter_mut().map(|v| std::sync::Mutex::new(std::mem::take(v))).collect();
+            par_rows(&mut rows, 1, &mut fraction, || (), |r, _, _| {
+                *slots[r].lock().unwrap_or_else(|e| e.into_inner()) = self.contributing_clusters(r, &frame);
+            })?;
+            per_pose.push(slots.into_iter().map(|m| m.into_inner().unwrap_or_else(|e| e.into_inner())).collect());
+            welded_poses.push(frame.positions);
+        }
+        self.pvs = Some(Pvs::new(per_pose, welded_poses, tolerance));
+        self.last = None;
+        Ok(())
+    }
+
+    pub fn clear_pvs(&mut self) {
+        self.pvs = None;
+        self.last = None;
+    }
+
+    pub fn pvs(&self) -> Option<&Pvs> {
+        self.pvs.as_ref()
+    }
+
+    /// The clusters that contribute to receiver `r`'s mask in this frame (see `pvs.rs`), its
+    /// ring always included.
+    fn contributing_clusters(&self, r: usize, frame: &Frame) -> Vec<u32> {
+        let mut kept = self.hierarchy.near_of(r).to_vec();
+        let Some(receiver) = Receiver::new(frame.positions[r], frame.normals[r], self.offset) else { return kept };
+        let (h, table) = (&self.hierarchy, &*self.table);
+        let mut candidates = Vec::new();
+        for g in 0..h.groups() {
+            let first = g * GROUP;
+            let clusters = (first + GROUP).min(h.clusters()) - first;
+            if self.blockers.cull && receiver.below_horizon(&frame.group_bounds[g]) {
+                continue;
+            }
+            let expanded = self.expanded_clusters(r, &receiver, frame, first, clusters);
+            for i in 0..clusters {
+                let c = first + i;
+                let (mut mask, mut pipeline) = (Mask::EMPTY, Pipeline::default());
+                if expanded >> i & 1 == 1 {
+                    for packet in self.fine_packets.of(c) {
+                        pipeline.rasterize_packet(table, receiver.origin, &receiver.frame, packet, u32::MAX, r as u32, &mut mask);
+                    }
+                } else {
+                    let packet = &self.coarse_packets.of(g)[i / LANES];
+                    pipeline.rasterize_packet(table, receiver.origin, &receiver.frame, packet, 1 << (i % LANES), r as u32, &mut mask);
+                }
+                pipeline.drain(table, &mut mask);
+                if mask != Mask::EMPTY {
+                    let s = frame.spheres[c];
+                    let d2 = [0, 1, 2].map(|a| s[a] - receiver.origin[a]).iter().map(|d| d * d).sum::<f32>();
+                    candidates.push((d2, c as u32, mask));
+                }
+            }
+        }
+        kept.extend(contributing(candidates));
+        kept
+    }
+
+    /// Bits of the clusters `first..first + clusters` that receiver `r` sees at full
+    /// resolution: its ring, the clusters close to it, or all without the hierarchy.
+    #[inline(always)]
+    fn expanded_clusters(&self, r: usize, receiver: &Receiver, frame: &Frame, first: usize, clusters: usize) -> u32 {
+        if !self.blockers.hierarchy {
+            return (1 << clusters) - 1;
+        }
+        let near = self.hierarchy.near_of(r);
+        let mut next = near.partition_point(|&c| (c as usize) < first);
+        take_bits(near, &mut next, first, clusters) | close_clusters(receiver, &frame.spheres[first..first + clusters])
     }
 
     /// Per cluster, the bounding box of its coarse triangle and the fine triangles it owns in
@@ -280,7 +383,7 @@ impl Solver {
     fn reusable_receivers(&self, frame: &Frame) -> Vec<bool> {
         let n = frame.positions.len();
         let Some(last) = self.last.as_ref().filter(|_| self.blockers.reuse) else { return vec![false; n] };
-        if last.views.as_deref() != frame.views {
+        if last.views != frame.views || last.used_pvs != frame.use_pvs {
             return vec![false; n];
         }
         let moved: Vec<bool> = (0..n).map(|v| frame.positions[v] != last.positions[v] || frame.normals[v] != last.normals[v]).collect();
@@ -340,15 +443,14 @@ impl Solver {
         let mut rasterized = 0u32;
         let near = h.near_of(r);
         let mut next_near = 0;
+        let visible = self.pvs.as_ref().filter(|_| frame.use_pvs).map(|pvs| pvs.of(r));
+        let mut next_visible = 0;
         for g in 0..h.groups() {
             let first = g * GROUP;
             let clusters = (first + GROUP).min(h.clusters()) - first;
-            let mut expanded = 0u32;
-            while next_near < near.len() && (near[next_near] as usize) < first + clusters {
-                expanded |= 1 << (near[next_near] as usize - first);
-                next_near += 1;
-            }
-            if self.blockers.cull && receiver.below_horizon(&frame.group_bounds[g]) {
+            let mut expanded = take_bits(near, &mut next_near, first, clusters);
+            let seen = visible.map_or(u32::MAX, |v| take_bits(v, &mut next_visible, first, clusters));
+            if seen == 0 || (self.blockers.cull && receiver.below_horizon(&frame.group_bounds[g])) {
                 continue;
             }
             if !self.blockers.hierarchy {
@@ -356,10 +458,11 @@ impl Solver {
             } else {
                 expanded |= close_clusters(&receiver, &frame.spheres[first..first + clusters]);
                 for (p, packet) in self.coarse_packets.of(g).iter().enumerate() {
-                    let far = !expanded >> (p * LANES);
+                    let far = (!expanded & seen) >> (p * LANES);
                     rasterized += pipeline.rasterize_packet(table, origin, &receiver.frame, packet, far, r as u32, &mut mask);
                 }
             }
+            expanded &= seen;
             let mut bits = expanded;
             while bits != 0 {
                 let c = first + bits.trailing_zeros() as usize;
@@ -378,7 +481,7 @@ impl Solver {
             }
         }
         pipeline.drain(table, &mut mask);
-        let view = frame.views.map_or(receiver.frame.n, |v| v[r]);
+        let view = frame.views.as_ref().map_or(receiver.frame.n, |v| v[r]);
         self.quadrature.integrate(&mask, &receiver.frame, self.brdf, view, out);
         rasterized as u64
     }
@@ -393,6 +496,18 @@ fn snapped(positions: &[Vec3], triangles: &[[u32; 3]]) -> Vec<Vec3> {
     triangles.iter().flatten().for_each(|&v| used[v as usize] = true);
     let snap = |p: &Vec3| p.map(|c| (c * 1024.0).round() / 1024.0);
     positions.iter().zip(used).map(|(p, used)| if used { snap(p) } else { [0.0; 3] }).collect()
+}
+
+/// Bits (relative to `first`) of the entries of the ascending `list` below `first + count`,
+/// from `next` on; advances `next` past them.
+#[inline(always)]
+fn take_bits(list: &[u32], next: &mut usize, first: usize, count: usize) -> u32 {
+    let mut bits = 0;
+    while *next < list.len() && (list[*next] as usize) < first + count {
+        bits |= 1 << (list[*next] as usize - first);
+        *next += 1;
+    }
+    bits
 }
 
 /// Bit i set when cluster i's near sphere contains the receiver.

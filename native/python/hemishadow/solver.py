@@ -5,6 +5,10 @@ import numpy as np
 
 from . import _checks, _native
 
+# Largest vertex displacement from a sampled pose (fraction of the rest pose's half size) up
+# to which a frame uses the potentially visible sets; measured in docs/algorithm.md.
+DEFAULT_PVS_TOLERANCE = 0.03
+
 
 class TransferSolver:
     """Transfer vectors of one mesh topology over many frames (poses, simulation steps).
@@ -64,9 +68,40 @@ class TransferSolver:
 
     @property
     def stats(self):
-        """Last solve: {'blockers_per_vertex', 'computed', 'reused'}."""
-        blockers, computed, reused = self._solver.stats()
-        return {"blockers_per_vertex": blockers, "computed": computed, "reused": reused}
+        """Last solve: {'blockers_per_vertex', 'computed', 'reused', 'pvs'} ('pvs': whether the
+        frame was close enough to the sampled poses to use the potentially visible sets)."""
+        blockers, computed, reused, used_pvs = self._solver.stats()
+        return {"blockers_per_vertex": blockers, "computed": computed, "reused": reused, "pvs": used_pvs}
+
+    def build_pvs(self, poses, *, tolerance=DEFAULT_PVS_TOLERANCE, progress=None):
+        """Potentially visible sets (the paper's section 3.2), opt-in: it needs poses of the
+        animation. poses: (F, N, 3) vertex positions of a few sampled frames (the bake range,
+        or poses you pick). For each receiver the solver keeps the clusters that contribute to
+        its mask in some sampled pose (nearest first, those that add cells the nearer ones
+        have not covered); later solves rasterize only those while the frame's pose stays
+        within `tolerance` of a sampled one: the largest vertex displacement, as a fraction of
+        the rest pose's half size (its largest half-extent). Farther poses fall back to the
+        full hierarchy (`stats['pvs']` says which was used). Replaces earlier sets."""
+        poses = np.ascontiguousarray(poses, dtype=np.float32)
+        if poses.ndim != 3 or poses.shape[1:] != (self.vertex_count, 3):
+            raise ValueError(f"poses must have shape (F, {self.vertex_count}, 3), got {poses.shape}")
+        if len(poses) == 0:
+            raise ValueError("build_pvs needs at least one pose")
+        if not np.isfinite(poses).all():
+            raise ValueError("poses must be finite")
+        if not (np.isfinite(tolerance) and tolerance >= 0):
+            raise ValueError(f"tolerance must be a finite, non-negative number, got {tolerance!r}")
+        self._solver.build_pvs(poses, float(tolerance), _checks.progress(progress))
+
+    def clear_pvs(self):
+        """Drops the potentially visible sets: every solve uses the full hierarchy again."""
+        self._solver.clear_pvs()
+
+    @property
+    def pvs(self):
+        """{'poses', 'clusters_per_vertex', 'tolerance'} of the current sets, or None."""
+        info = self._solver.pvs_info()
+        return None if info is None else dict(zip(("poses", "clusters_per_vertex", "tolerance"), info))
 
     def solve(self, vertices, normals=None, view=None, *, progress=None):
         """Transfer (N, bands^2) float32 for this frame's positions (N, 3); normals, view and
