@@ -49,5 +49,5 @@ def time_at_error(error, curve):
     if first == 0:  # less accurate than the cheapest point
         return math.exp(lt[0] - 2.0 * (x - le[0])), f"law, below {pts[0][0]} rays"
     i = first - 1
-    slope = (lt[i + 1] - lt[i]) / (le[i + 1] - le[i]) * 0.9 if le[i + 1] != le[i] else 0.0
+    slope = (lt[i + 1] - lt[i]) / (le[i + 1] - le[i]) if le[i + 1] != le[i] else 0.0
     return math.exp(lt[i] + slope * (x - le[i])), "interpolated"
