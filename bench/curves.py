@@ -1,8 +1,8 @@
 """Embree's time-versus-error curve and the read-off of its time at a given error.
 
 A Monte-Carlo estimate's error falls as 1/sqrt(rays): beyond the ray counts that were run
-(`extend`), Embree's curve continues by the fitted law error = a / sqrt(rays) and its time
-grows linearly in rays from the last two measured points. `time_at_error` interpolates the
+(`extend`), Embree's curve continues by the law error = a / sqrt(rays), a fitted to the two
+densest measured points, and its time grows linearly in rays through those two points. `time_at_error` interpolates the
 curve log-log, so a hemishadow point's speed-up at equal error is time_at_error / its time.
 """
 
@@ -20,12 +20,12 @@ def fit_law(rays, errors):
 
 
 def extend(measured, ray_counts):
-    """measured: [(rays, ms, error)] ordered by rays (at least two). Returns the curve
-    [(rays, ms, error, 'measured' | 'fitted')] over `ray_counts` and the measured ones: a
-    measured point as it was, a larger ray count by the law (error a / sqrt(rays), time
-    linear in rays through the last two measured points)."""
+    """measured: [(rays, ms, error)] (at least two). Returns the curve [(rays, ms, error,
+    'measured' | 'fitted')] over the measured ray counts and the larger ones of `ray_counts`:
+    a measured point as it was, a larger ray count by the law (error a / sqrt(rays), a fitted
+    to the two densest measured points; time linear in rays through them)."""
     measured = sorted(measured)
-    a, _ = fit_law([m[0] for m in measured], [m[2] for m in measured])
+    a, _ = fit_law([m[0] for m in measured[-2:]], [m[2] for m in measured[-2:]])  # the densest two
     (r1, t1, _), (r2, t2, _) = measured[-2], measured[-1]
     per_ray = (t2 - t1) / (r2 - r1) if t2 > t1 else t2 / r2  # noise can invert the last two times
     curve = [(r, t, e, "measured") for r, t, e in measured]
@@ -33,6 +33,12 @@ def extend(measured, ray_counts):
         if r > r2:
             curve.append((r, t2 + per_ray * (r - r2), a / math.sqrt(r), "fitted"))
     return curve
+
+
+def reference_noise_factor(rays, reference_rays):
+    """Per receiver, |T_embree - T_ref|^2 estimates err^2 (1 + rays / reference_rays) when the
+    reference is the same unbiased estimator with more rays: the factor that takes it off."""
+    return 1.0 / math.sqrt(1.0 + rays / reference_rays)
 
 
 def time_at_error(error, curve):

@@ -37,14 +37,20 @@ MARKERS = {"default": "o", "downsample 1": "<", "downsample 2": "^", "downsample
 # issue 9's targets: (mesh, speed-up at equal error, frames per second)
 TARGETS = {"suzanne_8k": (10.0, 40.0), "cloth": (20.0, 300.0)}
 TARGET_RATIO = 4.5
+CONFIG = {}  # the run's configuration, set by main
 
 
 def measured(m):
-    return [r for r in m["hemishadow"] if not r.get("same_as_default")]
+    return [r for r in m["hemishadow"] if not r.get("same_as_default") and not r.get("failed")]
+
+
+def embree_error(r, cfg):
+    """Embree's median error with the reference's share of the noise taken off."""
+    return r["error"]["median"] * curves.reference_noise_factor(r["rays"], cfg["reference_side"] ** 2)
 
 
 def embree_curve(m):
-    pts = [(r["rays"], r["ms"], r["error"]["median"]) for r in m["embree"]]
+    pts = [(r["rays"], r["ms"], embree_error(r, CONFIG)) for r in m["embree"]]
     if len(pts) < 2:
         return [(r, t, e, "measured") for r, t, e in pts]
     return curves.extend(pts, [s * s for s in FITTED_SIDES])
@@ -169,8 +175,10 @@ def header(results):
         f"{cfg['reference_side'] ** 2} stratified cosine rays per receiver with the control variate, on "
         f"{cfg['receivers']} random receivers (all vertices when fewer), on frames {eval_frames}; computed in the "
         "Embree worker processes, outside every timing. It has at least 4x the rays of the densest Embree point "
-        "it judges (Embree is run to at most a quarter of its rays), so its own noise adds at most about 12 % "
-        "(sqrt(1 + 1/4)) to that point's error. **Errors** are `error_summary` on those receivers, averaged over "
+        "it judges (Embree is run to at most a quarter of its rays). Being the same unbiased estimator with R "
+        "rays, its noise adds N / R to the expected squared error of Embree's N-ray point: Embree's median "
+        "errors are divided by sqrt(1 + N / R) (at most 11 %; both numbers are in the per-mesh tables), so "
+        "Embree is not charged for the reference's noise. **Errors** are `error_summary` on those receivers, averaged over "
         "the evaluated frames: the median over receivers of the per-vertex relative L2 error (the curves), and "
         "the mean over receivers with AO >= 0.1 (tables).",
         "- **hemishadow**: `TransferSolver(rest pose, tris, offset=..., reuse=False, **variant)`, built once, one "
@@ -191,8 +199,7 @@ def header(results):
         + ", ".join(str(s * s) for s in cfg["embree_sides"] if 2 * s <= cfg["reference_side"])
         + f" in turn, the next one run while predicted (4x the last time) to take at most {cfg['embree_cap']:g} s "
         "per frame, and at least two; **beyond what was run, the points are fitted** (hollow markers, dashed): "
-        "error = a / sqrt(N) with a fitted to the measured points, time linear in N through the last two measured "
-        "points. The per-mesh tables say which points are measured and which fitted.",
+        "error = a / sqrt(N) with a fitted to the two densest measured points, time linear in N through them. The per-mesh tables say which points are measured and which fitted.",
         "- **Speed-up at equal error**: for a hemishadow point of median error e, Embree's time at e is read off "
         "Embree's curve (measured and fitted points) by log-log interpolation between the neighbouring ray "
         "counts; outside the curve, by the Monte-Carlo law time ∝ error⁻² from its nearest end (said in the "
@@ -220,8 +227,8 @@ def targets(results):
                    f"| {met(d['fps'] >= fps)} |")
         out.append(f"| median error <= 2 % | {name} | {pct(d['error']['median'])} (mean over AO >= 0.1: "
                    f"{pct(d['error']['mean'])}) | {met(d['error']['median'] <= TARGET_ERROR)} |")
-    curve = {r["vertices"]: r for r in results.get("vertex_curve", [])}
-    by_level = {r["level"]: r for r in results.get("vertex_curve", [])}
+    curve = [r for r in results.get("vertex_curve", []) if "ms" in r]
+    by_level = {r["level"]: r for r in curve}
     if 3 in by_level and 4 in by_level:
         a, b = by_level[3], by_level[4]
         ratio = b["ms"] / a["ms"]
@@ -245,22 +252,24 @@ def speedup_table(results):
     for name, m in results["meshes"].items():
         rows = {r["method"]: r for r in measured(m)}
         sp = speedups(m)
-        fitted_from = min((p[1] for p in embree_curve(m) if p[3] == "fitted"), default=float("inf"))
+        measured_to = max((p[1] for p in embree_curve(m) if p[3] == "measured"), default=0.0)
         cells = []
         for lab in labels:
             r = rows.get(lab)
             if r is None:
-                cells.append("= default" if any(x["method"] == lab for x in m["hemishadow"]) else "–")
+                cells.append("= default" if any(x["method"] == lab and x.get("same_as_default")
+                                                for x in m["hemishadow"]) else "–")
                 continue
             ms, how, ratio = sp[lab]
-            star = "✱" if how != "interpolated" or ms > fitted_from else ""
+            star = "✱" if how != "interpolated" or ms > measured_to else ""
             cells.append(f"{fmt_ms(r['ms'])} ms, {pct(r['error']['median'])}: **{ratio:.1f}x**{star}")
         out.append(f"| {name} | " + " | ".join(cells) + " |")
     return out + [""]
 
 
 def vertex_section(results):
-    rows = results.get("vertex_curve")
+    rows = [r for r in results.get("vertex_curve", []) if "ms" in r]
+    skipped = [r for r in results.get("vertex_curve", []) if "skipped" in r]
     if not rows:
         return []
     out = ["## Cost per vertex against the vertex count\n",
@@ -279,6 +288,9 @@ def vertex_section(results):
         out.append(f"| {r['level']} | {r['vertices']} | {r['triangles']} | {fmt_ms(r['ms'])} | "
                    f"{1e3 * r['ms'] / r['vertices']:.2f} | {r['blockers_per_vertex']:.0f} | {r['frames_timed']}"
                    f"{'' if r['warm_up'] else ' (no warm-up)'} | {embree} |")
+    for r in skipped:
+        out.append(f"\nLevel {r['level']} was not run: {r['skipped']} (extrapolated from the last two levels; "
+                   f"the run's cap is {results['config']['level_cap']:.0f} s).")
     return out + [""]
 
 
@@ -289,8 +301,9 @@ def mesh_section(name, m):
            "| Embree ms at that median | speed-up | frames |", "|---|---|---|---|---|---|---|---|---|---|"]
     sp = speedups(m)
     for r in m["hemishadow"]:
-        if r.get("same_as_default"):
-            out.append(f"| hemishadow {r['method']} | = default | | | | | | | | |")
+        if r.get("same_as_default") or r.get("failed"):
+            what = "= default" if r.get("same_as_default") else f"failed: `{r['failed']}`"
+            out.append(f"| hemishadow {r['method']} | {what} | | | | | | | | |")
             continue
         e = r["error"]
         ms, how, ratio = sp[r["method"]]
@@ -305,14 +318,18 @@ def mesh_section(name, m):
         r = byrays.get(rays) if kind == "measured" else None
         if r:
             e = r["error"]
-            out.append(f"| Embree {rays} rays, measured | {fmt_ms(ms)} | {r['fps']:.1f} | | {pct(e['median'])} "
+            out.append(f"| Embree {rays} rays, measured | {fmt_ms(ms)} | {r['fps']:.1f} | | {pct(err)} "
+                       f"({pct(e['median'])} raw) "
                        f"| {pct(e['mean'])} | {e['ao_mean_abs']:.4f} | | | {r['frames_timed']} |")
         else:
             out.append(f"| Embree {rays} rays, *fitted* | {fmt_ms(ms)} | {1e3 / ms:.1f} | | {pct(err)} | | | | | – |")
     if len(m["embree"]) >= 2:
-        a, slope = curves.fit_law([r["rays"] for r in m["embree"]], [r["error"]["median"] for r in m["embree"]])
-        out.append(f"\nEmbree fit: median error = {a:.3f} / sqrt(N); the measured log-log slope is {slope:.2f} "
-                   "(the law's: -0.50).\n")
+        rays = [r["rays"] for r in m["embree"]]
+        errors = [embree_error(r, CONFIG) for r in m["embree"]]
+        a, _ = curves.fit_law(rays[-2:], errors[-2:])
+        _, slope = curves.fit_law(rays, errors)
+        out.append(f"\nEmbree fit: median error = {a:.3f} / sqrt(N) (two densest measured points); the log-log "
+                   f"slope over all measured points is {slope:.2f} (the law's: -0.50).\n")
     return out + [""]
 
 
@@ -331,14 +348,15 @@ def build_markdown(results):
 def main(path=None, write_docs=None):
     path = pathlib.Path(path or HERE / "results.json")
     results = json.loads(path.read_text())
+    CONFIG.update(results["config"])
     if write_docs is None:
         write_docs = not results.get("quick")
     img_dir = ROOT / "docs" / "images" if write_docs else HERE / "quick"
     img_dir.mkdir(exist_ok=True)
     md_path = ROOT / "docs" / "benchmarks.md" if write_docs else img_dir / "benchmarks.md"
     plot_curves(results, img_dir / "bench_curves.png")
-    if results.get("vertex_curve"):
-        plot_vertex_curve(results["vertex_curve"], img_dir / "bench_vertex_curve.png")
+    if any("ms" in r for r in results.get("vertex_curve", [])):
+        plot_vertex_curve([r for r in results["vertex_curve"] if "ms" in r], img_dir / "bench_vertex_curve.png")
     text = build_markdown(results)
     if not write_docs:
         text = text.replace("](images/", "](")

@@ -52,14 +52,16 @@ VARIANTS = [
 FULL = dict(
     meshes=["cloth", "suzanne_2k", "suzanne_8k", "suzanne_32k", "cesium_man", "fox", "rigged_figure"],
     frames=7, eval_frames=(2, 5), receivers=500, reference_side=128, embree_sides=(8, 16, 32, 64, 128),
-    hemishadow_budget=1.5, embree_budget=2.0, embree_cap=12.0,
+    hemishadow_budget=1.5, embree_budget=2.0, embree_cap=20.0,
     levels=(0, 1, 2, 3, 4, 5), level_frames=3, embree_levels=(0, 1, 2, 3, 4), curve_side=16, once_above=200_000,
+    warm_up_cap=15.0, level_cap=240.0,
 )
 QUICK = dict(
     meshes=["cloth", "suzanne_2k", "rigged_figure"],
     frames=3, eval_frames=(1,), receivers=150, reference_side=64, embree_sides=(8, 16, 32, 64, 128),
     hemishadow_budget=0.3, embree_budget=0.3, embree_cap=0.5,
     levels=(0, 1, 2), level_frames=2, embree_levels=(0, 1, 2), curve_side=16, once_above=200_000,
+    warm_up_cap=2.0, level_cap=10.0,
 )
 
 
@@ -140,7 +142,12 @@ def hemishadow_rows(frames, tris, normals, offset, order, errors_of, cfg, log):
         pvs_ms = None
         if pvs:
             start = time.perf_counter()
-            solver.build_pvs(np.ascontiguousarray(frames, np.float32))
+            try:
+                solver.build_pvs(np.ascontiguousarray(frames, np.float32))
+            except Exception as error:  # an engine in the making: say so, keep the run
+                log(f"   {label:14s} not measured: build_pvs(poses (F, N, 3) float32) raised {error!r}")
+                rows.append({"method": label, "kwargs": kwargs, "failed": repr(error)})
+                continue
             pvs_ms = 1e3 * (time.perf_counter() - start)
         solver.solve(frames[order[0]], normals[order[0]])  # warm-up
         out, blockers = {}, []
@@ -155,6 +162,7 @@ def hemishadow_rows(frames, tris, normals, offset, order, errors_of, cfg, log):
         ms = 1e3 * float(np.median(times))
         row = {"method": label, "kwargs": kwargs, "ms": ms, "fps": 1e3 / ms, "frames_timed": len(times),
                "build_ms": build_ms, "pvs_ms": pvs_ms, "blockers_per_vertex": float(np.mean(blockers)),
+               "last_stats": {k: v for k, v in solver.stats.items() if isinstance(v, (int, float, bool, str))},
                "error": errors_of(out, lambda T: (T, T[:, 0] / reference.AO_SCALE)),
                "identical_to_default": bool(default_out) and all(np.array_equal(out[f], default_out[f])
                                                                  for f in out if f in default_out)}
@@ -232,6 +240,11 @@ def vertex_curve(pool, cfg, log):
     """Default solve time and Embree's (curve_side^2 rays) against Suzanne's subdivision level."""
     rows = []
     for level in cfg["levels"]:
+        predicted = predict_ms(rows)
+        if predicted / 1e3 > cfg["level_cap"]:
+            log(f"   level {level}: not run (predicted {predicted / 1e3:.0f} s per solve)")
+            rows.append({"level": level, "skipped": f"predicted {predicted / 1e3:.0f} s per solve"})
+            break
         t0 = time.perf_counter()
         frames, tris = scenes.suzanne(level, n_frames=cfg["level_frames"])
         tris64 = tris.astype(np.int64)
@@ -240,7 +253,7 @@ def vertex_curve(pool, cfg, log):
         n_vertices = frames.shape[1]
         made = time.perf_counter() - t0
         solver = hemishadow.TransferSolver(frames[0], tris, offset=offset, reuse=False)
-        once = n_vertices > cfg["once_above"]
+        once = n_vertices > cfg["once_above"] or predicted / 1e3 > cfg["warm_up_cap"]
         if not once:
             solver.solve(frames[1], normals[1])  # warm-up
         blockers = []
@@ -254,7 +267,9 @@ def vertex_curve(pool, cfg, log):
         row = {"level": level, "vertices": n_vertices, "triangles": len(tris), "ms": ms, "frames_timed": len(times),
                "warm_up": not once, "blockers_per_vertex": float(np.mean(blockers)), "embree_ms": None}
         del solver
-        if level in cfg["embree_levels"]:
+        done = [r for r in rows if r.get("embree_ms")]
+        if level in cfg["embree_levels"] and (not done or done[-1]["embree_ms"] * n_vertices / done[-1]["vertices"]
+                                              < 1e3 * cfg["level_cap"] / 4):
             side = cfg["curve_side"]
             e_times = timed_frames(range(1, len(frames)), lambda f: pool.solve(frames[f], tris64, normals[f], offset,
                                                                                 side, seed=f), 0.0, 3.0)
@@ -265,6 +280,17 @@ def vertex_curve(pool, cfg, log):
             f"({1e6 * ms / n_vertices / 1e3:.2f} us/vertex, {len(times)} frames{'' if row['warm_up'] else ', no warm-up'})"
             + (f"  Embree {row['embree_ms']:10.1f} ms" if row["embree_ms"] else "") + f"  (mesh made in {made:.1f} s)")
     return rows
+
+
+def predict_ms(rows):
+    """The next level's solve time (4x the vertices of the last level run), if the growth of
+    the cost per vertex between the last two levels continues; 0 before two levels ran."""
+    done = [r for r in rows if "ms" in r]
+    if len(done) < 2:
+        return 0.0
+    a, b = done[-2:]
+    per_vertex = b["ms"] / b["vertices"]
+    return 4 * b["ms"] * max(1.0, per_vertex / (a["ms"] / a["vertices"]))
 
 
 def main():
