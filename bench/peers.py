@@ -13,7 +13,7 @@ import multiprocessing
 import os
 
 import numpy as np
-from embreex import rtcore_scene
+from embreex import rtcore, rtcore_scene
 from embreex.mesh_construction import TriangleMesh
 
 import hemishadow
@@ -66,6 +66,16 @@ def cosine_directions(u, n, t, s):
     return dirs.reshape(-1, 3).astype(np.float32)
 
 
+_DEVICE = []
+
+
+def _device():
+    """One Embree device per process: a new one per scene would add milliseconds per frame."""
+    if not _DEVICE:
+        _DEVICE.append(rtcore.EmbreeDevice())
+    return _DEVICE[0]
+
+
 def embree_transfer(vertices, triangles, normals, offset, n_side, seed, first=0, count=None):
     """Transfer (count, 25) float32 and AO (count,) of receivers first .. first + count - 1 by
     n_side^2 stratified cosine rays each from p + offset n: BVH build, first-hit queries, rays
@@ -74,7 +84,7 @@ def embree_transfer(vertices, triangles, normals, offset, n_side, seed, first=0,
     v = np.asarray(vertices, np.float32)
     tris = np.asarray(triangles, np.int64)
     count = len(v) - first if count is None else count
-    scene = rtcore_scene.EmbreeScene()
+    scene = rtcore_scene.EmbreeScene(_device())
     TriangleMesh(scene, v[tris])
     rays = n_side * n_side
     n_all = np.asarray(normals, np.float32)[first:first + count]

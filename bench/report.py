@@ -95,7 +95,8 @@ def plot_curves(results, path):
                 label=f"Embree, N rays, {results['embree_workers']} processes (measured)")
         if fit:
             tail = meas[-1:] + fit
-            ax.plot([p[1] for p in tail], [p[2] for p in tail], "--", color="0.35", marker="o", mfc="white",
+            ax.plot([p[1] for p in tail], [p[2] for p in tail], "--", color="0.35")
+            ax.plot([p[1] for p in fit], [p[2] for p in fit], "--", color="0.35", marker="o", mfc="white",
                     label="Embree, fitted: a / sqrt(N), time linear in N")
         for p in curve:
             ax.annotate(str(p[0]), (p[1], p[2]), textcoords="offset points", xytext=(4, 2), fontsize=7, color="0.35")
@@ -161,7 +162,8 @@ def header(results):
         + ". Everything below is generated from that run's `bench/results.json` (`bench/report.py` redraws the "
         "page from it).\n")
     out.append("`TransferSolver` defaults of the engine measured: "
-               + ", ".join(f"`{k}={v}`" for k, v in results["solver_defaults"].items()) + ".\n")
+               + ", ".join(f"`{k}={v}`" for k, v in results["solver_defaults"].items()) + ". "
+               + identical_note(results))
     out.append("## What is measured\n")
     eval_frames = ", ".join(str(f) for f in cfg["eval_frames"])
     out += [
@@ -267,6 +269,34 @@ def speedup_table(results):
     return out + [""]
 
 
+def pvs_section(results):
+    out = ["## PVS\n"]
+    if not results["pvs_available"]:
+        return out + ["Not measured: the engine of this run has no `TransferSolver.build_pvs`.\n"]
+    out += ["The default with and without `build_pvs(all frames)` (the timed frames are among the sampled poses).\n",
+            "| mesh | default ms | PVS ms | speed-up | median: default → PVS | mean (AO ≥ 0.1): default → PVS "
+            "| build_pvs ms |", "|---|---|---|---|---|---|---|"]
+    for name, m in results["meshes"].items():
+        rows = {r["method"]: r for r in m["hemishadow"]}
+        d, p = rows.get("default"), rows.get("PVS")
+        if p is None or p.get("failed"):
+            out.append(f"| {name} | {fmt_ms(d['ms'])} | {p['failed'] if p else '–'} | | | | |")
+            continue
+        out.append(f"| {name} | {fmt_ms(d['ms'])} | {fmt_ms(p['ms'])} | {d['ms'] / p['ms']:.2f}x "
+                   f"| {pct(d['error']['median'])} → {pct(p['error']['median'])} "
+                   f"| {pct(d['error']['mean'])} → {pct(p['error']['mean'])} | {p['pvs_ms']:.0f} |")
+    return out + [""]
+
+
+def identical_note(results):
+    """Which variants gave the default's transfer bit for bit on every mesh (how the
+    defaults left open by the signature, e.g. downsample=None, resolve)."""
+    labels = [lab for lab in MARKERS if lab not in ("default", "PVS")]
+    same = [lab for lab in labels if all(any(r["method"] == lab and r.get("identical_to_default") for r in m["hemishadow"])
+                                        for m in results["meshes"].values())]
+    return (f"On every mesh the default's transfer was bit-identical to that of: {', '.join(same) or 'none'}.\n")
+
+
 def vertex_section(results):
     rows = [r for r in results.get("vertex_curve", []) if "ms" in r]
     skipped = [r for r in results.get("vertex_curve", []) if "skipped" in r]
@@ -276,8 +306,10 @@ def vertex_section(results):
            "Suzanne with Subdivision Surface levels "
            f"{', '.join(str(r['level']) for r in rows)} applied, bent and twisted as above; the default solver "
            "(reuse off), one warm-up solve then the median over the moving frames, except meshes above "
-           f"{results['config']['once_above']} vertices, timed once without a warm-up (the plane table is shared "
-           "and already built). Embree at its 256-ray point on all cores, where run.\n",
+           f"{results['config']['once_above']} vertices or predicted (from the last two levels) to take more than "
+           f"{results['config']['warm_up_cap']:g} s: those are timed once without a warm-up (the plane table is "
+           "shared and already built). Embree at its 256-ray point on all cores, where run. The 126k / 32k ratio "
+           "of the targets is level 4 / level 3 of this table.\n",
            "![cost per vertex against triangles](images/bench_vertex_curve.png)\n",
            "| level | vertices | triangles | hemishadow ms / frame | µs / vertex | blockers / vertex | frames "
            "| Embree ms / frame | Embree µs / vertex | Embree / hemishadow |",
@@ -297,7 +329,7 @@ def vertex_section(results):
 def mesh_section(name, m):
     out = [f"### {TITLES.get(name, name)}: {m['vertices']} vertices, {m['triangles']} triangles\n",
            f"Errors on {m['receivers']} receivers x frames {m['eval_frames']}.\n",
-           "| method | ms / frame | FPS | blockers / vertex | median | mean (AO ≥ 0.1) | AO mean abs. error "
+           "| method | ms / frame | FPS | blockers / vertex | median | mean (AO ≥ 0.1, raw) | AO mean abs. error "
            "| Embree ms at that median | speed-up | frames |", "|---|---|---|---|---|---|---|---|---|---|"]
     sp = speedups(m)
     for r in m["hemishadow"]:
@@ -339,7 +371,7 @@ def build_markdown(results):
             "Median relative L2 error against ms per frame, log-log, per mesh: Embree's curve (filled: measured, "
             "hollow and dashed: fitted) and every hemishadow setting; the dotted red line is 2 %.\n",
             "![time against median error, per mesh](images/bench_curves.png)\n"]
-    out += speedup_table(results) + vertex_section(results) + ["## Per mesh\n"]
+    out += speedup_table(results) + pvs_section(results) + vertex_section(results) + ["## Per mesh\n"]
     for name, m in results["meshes"].items():
         out += mesh_section(name, m)
     return "\n".join(out)

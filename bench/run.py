@@ -52,7 +52,7 @@ VARIANTS = [
 FULL = dict(
     meshes=["cloth", "suzanne_2k", "suzanne_8k", "suzanne_32k", "cesium_man", "fox", "rigged_figure"],
     frames=7, eval_frames=(2, 5), receivers=500, reference_side=128, embree_sides=(8, 16, 32, 64, 128),
-    hemishadow_budget=1.5, embree_budget=2.0, embree_cap=20.0,
+    hemishadow_budget=1.5, embree_budget=2.0, embree_cap=30.0,
     levels=(0, 1, 2, 3, 4, 5), level_frames=3, embree_levels=(0, 1, 2, 3, 4), curve_side=16, once_above=200_000,
     warm_up_cap=15.0, level_cap=240.0,
 )
