@@ -126,9 +126,14 @@ def _trace(scene, v, tris, n, ids, u, offset):
     blocked = hit >= 0
     rows = receiver[blocked] - ids[0]
     y = hemishadow.sh_basis(dirs[blocked]).astype(np.float64)
-    # per-receiver sums (bincount adds each bin in ray order): independent of the chunking
-    sums = np.stack([np.bincount(rows, weights=y[:, k], minlength=count) for k in range(y.shape[1])], axis=1)
-    return sums, np.bincount(rows, minlength=count)
+    # per-receiver sums over each receiver's own run of rows (sorted): independent of the chunking
+    bounds = np.searchsorted(rows, np.arange(count + 1))
+    n_blocked = np.diff(bounds)
+    sums = np.zeros((count, y.shape[1]))
+    some = n_blocked > 0
+    if some.any():
+        sums[some] = np.add.reduceat(y, bounds[:-1][some], axis=0)
+    return sums, n_blocked
 
 
 def shares(count, workers):
