@@ -20,10 +20,19 @@ def law_curve(rays):
     return [(r, PER_RAY * r, A / math.sqrt(r)) for r in rays]
 
 
-def test_fit_recovers_the_law():
-    a, slope = curves.fit_law([64, 256, 1024], [A / 8, A / 16, A / 32])
-    assert a == pytest.approx(A, rel=1e-12)
-    assert slope == pytest.approx(-0.5, abs=1e-12)
+@pytest.mark.parametrize("b", [-0.5, -0.6, -0.75])
+def test_fit_recovers_the_law(b):
+    a, fitted, slope = curves.fit_law([64, 256, 1024], [A * n**b for n in (64, 256, 1024)])
+    assert (a, fitted, slope) == pytest.approx((A, b, b), rel=1e-9)
+
+
+@pytest.mark.parametrize("b, held", [(-1.2, -0.75), (0.1, -0.5)])
+def test_fit_holds_the_exponent_within_monte_carlo_bounds(b, held):
+    rays = [64, 256, 1024]
+    a, fitted, slope = curves.fit_law(rays, [A * n**b for n in rays])
+    assert slope == pytest.approx(b, rel=1e-9)
+    assert fitted == held
+    assert a * 1024**held == pytest.approx(A * 1024**b, rel=0.5)  # through the densest points
 
 
 @pytest.mark.parametrize("error", [0.05, 0.02, 0.0123, A / 64 * 1.001])
@@ -36,26 +45,32 @@ def test_time_at_error_interpolates_log_log(error):
 
 def test_time_at_error_outside_the_curve_follows_the_law():
     curve = [(*p, "measured") for p in law_curve([64, 256])]
-    low, how_low = curves.time_at_error(A / 100, curve)  # more accurate than 256 rays
-    high, how_high = curves.time_at_error(A / 4, curve)  # less accurate than 64 rays
+    low, how_low = curves.time_at_error(A / 100, curve, -0.5)  # more accurate than 256 rays
+    high, how_high = curves.time_at_error(A / 4, curve, -0.5)  # less accurate than 64 rays
     assert (how_low, how_high) == ("law, beyond 256 rays", "law, below 64 rays")
     assert low == pytest.approx(PER_RAY * 100**2, rel=1e-9)
     assert high == pytest.approx(PER_RAY * 4**2, rel=1e-9)
 
 
 def test_extend_marks_and_fits_the_points_beyond_the_measured_ones():
-    # measured with a fixed cost (BVH build) of 5 ms: time stays linear through the last two points
-    measured = [(r, 5.0 + PER_RAY * r, A / math.sqrt(r)) for r in (64, 256, 1024)]
-    curve = curves.extend(measured, [64, 256, 1024, 4096, 16384])
+    # measured with a fixed cost (BVH build) of 5 ms: time stays linear through the last two points;
+    # stratified rays: error ~ N^-0.7
+    measured = [(r, 5.0 + PER_RAY * r, A * r**-0.7) for r in (64, 256, 1024)]
+    curve, b = curves.extend(measured, [64, 256, 1024, 4096, 16384])
+    assert b == pytest.approx(-0.7, rel=1e-9)
     assert [p[3] for p in curve] == ["measured"] * 3 + ["fitted"] * 2
     r, ms, err, _ = curve[-1]
     assert r == 16384
-    assert err == pytest.approx(A / 128, rel=1e-12)
+    assert err == pytest.approx(A * 16384**-0.7, rel=1e-9)
     assert ms == pytest.approx(5.0 + PER_RAY * 16384, rel=1e-9)
-    # read off the fitted part: the equal-error time of error A / 100 lies between 4096 and 16384 rays
-    ms, how = curves.time_at_error(A / 100, curve)
+    # read off the fitted part: the equal-error time of an error between 4096's and 16384's
+    ms, how = curves.time_at_error(A * 8192**-0.7, curve, b)
     assert how == "interpolated"
     assert 5.0 + PER_RAY * 4096 < ms < 5.0 + PER_RAY * 16384
+    # beyond the curve, time ~ rays ~ error^(1 / b)
+    ms, how = curves.time_at_error(A * 65536**-0.7, curve, b)
+    assert how == "law, beyond 16384 rays"
+    assert ms == pytest.approx((5.0 + PER_RAY * 16384) * 4, rel=1e-9)
 
 
 def occluded_sphere():
