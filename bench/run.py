@@ -186,12 +186,12 @@ def hemishadow_rows(frames, tris, normals, offset, order, errors_of, cfg, log):
                "error": errors_of(e["out"], lambda T: (T, T[:, 0] / reference.AO_SCALE)),
                "identical_to_default": all(np.array_equal(e["out"][f], default_out[f]) for f in e["out"])}
         rows.append(row)
-        log(f"   {e["label"]:20s} {ms:9.2f} ms {row['fps']:8.1f} FPS {row['blockers_per_vertex']:7.0f} blockers  "
+        log(f"   {e['label']:20s} {ms:9.2f} ms {row['fps']:8.1f} FPS {row['blockers_per_vertex']:7.0f} blockers  "
             f"median {row['error']['median']:.4f} mean {row['error']['mean']:.4f}"
             + ("  (output = default)" if row["identical_to_default"] and e["label"] != "default" else "")
             + (f"  build_pvs {e['pvs_ms']:.0f} ms" if e["pvs_ms"] is not None else "") + f"  ({len(e['times'])} frames)")
     for row in skipped:
-        log(f"   {row["method"]:20s} " + ("= default" if row.get("same_as_default") else "failed"))
+        log(f"   {row['method']:20s} " + ("= default" if row.get("same_as_default") else "failed"))
     order_of = {label: k for k, (label, _) in enumerate(VARIANTS)}
     return sorted(rows + skipped, key=lambda r: order_of[r["method"]])
 
