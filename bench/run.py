@@ -29,7 +29,6 @@ ROOT = HERE.parent
 sys.path.insert(0, str(HERE))
 sys.path.insert(0, str(ROOT / "tests"))
 
-import curves  # noqa: E402
 import hemishadow  # noqa: E402
 import peers  # noqa: E402
 import reference  # noqa: E402
