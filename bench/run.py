@@ -1,15 +1,18 @@
-"""hemishadow benchmark: time per frame and error against a dense ray-traced reference, for
-hemishadow's solver variants, Embree ray casting projected on SH, and Cycles' AO bake.
+"""hemishadow benchmark: time-versus-error curves of hemishadow's settings and of Embree (all
+cores) per mesh, the speed-up at equal error read off them, and the cost per vertex against
+the vertex count (Suzanne subdivided 0..5).
 
-    .venv/bin/python bench/run.py            # full run (~10 minutes on 2 cores)
-    .venv/bin/python bench/run.py --quick    # smoke run (< 1 minute)
+    .venv/bin/python bench/run.py            # full run (< 25 minutes on 2 cores)
+    .venv/bin/python bench/run.py --quick    # smoke run (< 2 minutes)
 
 Writes bench/results.json (full) or bench/results_quick.json, then docs/benchmarks.md and
-docs/images/bench_*.png (full run only; `bench/report.py` redraws them from the JSON).
+docs/images/bench_*.png (full run; a quick run reports to bench/quick/). `bench/report.py`
+redraws the page from the JSON.
 """
 
 import argparse
 import datetime
+import inspect
 import json
 import os
 import pathlib
@@ -17,7 +20,6 @@ import platform
 import subprocess
 import sys
 import time
-
 import warnings
 
 import numpy as np
@@ -32,26 +34,35 @@ import peers  # noqa: E402
 import reference  # noqa: E402
 import scenes  # noqa: E402
 
-# (name, TransferSolver keyword arguments); reuse is off everywhere: every frame is computed.
+# (label, TransferSolver keyword arguments); reuse is off everywhere: every receiver is computed.
 VARIANTS = [
-    ("exact", dict(hierarchy=False, cull=False)),
-    ("exact + cull", dict(hierarchy=False, cull=True)),
-    ("hierarchy", dict(cull=False)),
-    ("hierarchy + cull (default)", dict()),
-    ("hierarchy + cull, ring 1", dict(ring=1)),
-    ("hierarchy + cull, coarse x4", dict(coarse_factor=4)),
+    ("default", {}),
+    ("downsample 1", dict(downsample=1)),
+    ("downsample 2", dict(downsample=2)),
+    ("downsample 4", dict(downsample=4)),
+    ("table 64", dict(table_resolution=64)),
+    ("table 96", dict(table_resolution=96)),
+    ("table 128", dict(table_resolution=128)),
+    ("ring 1", dict(ring=1)),
+    ("ring 2", dict(ring=2)),
+    ("PVS", {}),  # the default + build_pvs(the mesh's frames), when the engine has it
+    ("PVS, half the poses", {}),  # build_pvs(frames 0, 2, 4, ...): the odd frames are unseen poses
 ]
-DEFAULT = "hierarchy + cull (default)"
+PVS_POSES = {"PVS": slice(None), "PVS, half the poses": slice(None, None, 2)}
 
 FULL = dict(
     meshes=["cloth", "suzanne_2k", "suzanne_8k", "suzanne_32k", "cesium_man", "fox", "rigged_figure"],
-    frames=7, eval_frames=(2, 5), receivers=800, n_side=64, rays=(16, 32, 64, 128, 256, 512),
-    cycles_samples=(4, 16, 64, 256), budget=2.0, cycles_limit=25.0, skip_exact_above=20000,
+    frames=7, eval_frames=(2, 5), receivers=500, reference_side=128, embree_sides=(8, 16, 32, 64, 128),
+    hemishadow_budget=1.5, embree_budget=2.0, embree_cap=30.0,
+    levels=(0, 1, 2, 3, 4, 5), level_frames=3, embree_levels=(0, 1, 2, 3, 4), curve_side=16, once_above=200_000,
+    warm_up_cap=15.0, level_cap=240.0,
 )
 QUICK = dict(
-    meshes=["cloth", "suzanne_2k", "suzanne_8k", "rigged_figure"],
-    frames=3, eval_frames=(1,), receivers=150, n_side=24, rays=(16, 64),
-    cycles_samples=(4, 16), budget=0.3, cycles_limit=3.0, skip_exact_above=5000,
+    meshes=["cloth", "suzanne_2k", "rigged_figure"],
+    frames=3, eval_frames=(1,), receivers=150, reference_side=64, embree_sides=(8, 16, 32, 64, 128),
+    hemishadow_budget=0.3, embree_budget=0.3, embree_cap=0.5,
+    levels=(0, 1, 2), level_frames=2, embree_levels=(0, 1, 2), curve_side=16, once_above=200_000,
+    warm_up_cap=2.0, level_cap=10.0,
 )
 
 
@@ -68,174 +79,271 @@ def machine():
     model = next((line.split(":", 1)[1].strip() for line in open("/proc/cpuinfo") if line.startswith("model name")),
                  platform.processor())
     flags = next((line for line in open("/proc/cpuinfo") if line.startswith("flags")), "")
-    try:
-        commit = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"], capture_output=True,
-                                text=True).stdout.strip()
-        dirty = subprocess.run(["git", "-C", str(ROOT), "status", "--porcelain", "native"], capture_output=True,
-                               text=True).stdout.strip()
-    except OSError:
-        commit, dirty = "?", ""
+
+    def git(*args):
+        return subprocess.run(["git", "-C", str(ROOT), *args], capture_output=True, text=True).stdout.strip()
+
+    engine = pathlib.Path(hemishadow.__file__).resolve().parents[2]  # the checkout whose native/ is installed
+    engine_commit = subprocess.run(["git", "-C", str(engine), "rev-parse", "--short", "HEAD"], capture_output=True,
+                                   text=True).stdout.strip()
+    engine_dirty = subprocess.run(["git", "-C", str(engine), "status", "--porcelain", "native"], capture_output=True,
+                                  text=True).stdout.strip()
     import bpy
 
     return {
         "cpu": model, "cores": os.cpu_count(), "avx2": " avx2" in flags, "avx512f": " avx512f" in flags,
-        "load_before": os.getloadavg(), "date": datetime.datetime.now().isoformat(timespec="seconds"),
-        "python": platform.python_version(), "blender": bpy.app.version_string, "commit": commit + ("+dirty native/" if dirty else ""),
-        "hemishadow_module": hemishadow.__file__,
+        "load_before": os.getloadavg(), "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+        "python": platform.python_version(), "blender": bpy.app.version_string,
+        "commit": git("rev-parse", "--short", "HEAD") + ("+dirty" if git("status", "--porcelain", "bench") else ""),
+        "engine": f"{engine} at {engine_commit}" + (" + uncommitted native/ changes" if engine_dirty else ""),
     }
 
 
-def summarize(T, ao, T_ref, ao_ref):
-    s = reference.error_summary(T, T_ref, ao_ref)
-    d = np.asarray(ao, np.float64) - ao_ref
-    s["ao_mean_abs"] = float(np.abs(d).mean())
-    s["ao_median_abs"] = float(np.median(np.abs(d)))
-    s["ao_bias"] = float(d.mean())
-    return s
+def solver_defaults():
+    """TransferSolver's keyword defaults, as the installed engine declares them."""
+    params = inspect.signature(hemishadow.TransferSolver.__init__).parameters
+    return {k: p.default for k, p in params.items() if p.default is not inspect.Parameter.empty}
 
 
 def average(summaries):
-    keys = summaries[0].keys()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # nan for "no dark vertices"
-        return {k: float(np.nanmean([s[k] for s in summaries])) for k in keys}
+        return {k: float(np.nanmean([s[k] for s in summaries])) for k in summaries[0]}
 
 
-def timed_frames(order, solve, budget, one_if_slower=5.0):
-    """Run solve(frame) over `order` (eval frames first), at least over the eval frames,
-    more while the budget lasts; a frame slower than `one_if_slower` s stops after it."""
+def timed_frames(order, solve, budget, one_if_slower):
+    """Run solve(frame) over `order` (eval frames first), at least the first two, more while
+    the budget lasts; a frame slower than `one_if_slower` s stops after it."""
     times, spent = [], 0.0
     for k, f in enumerate(order):
         start = time.perf_counter()
         solve(f)
-        dt = time.perf_counter() - start
-        times.append(dt)
-        spent += dt
-        if dt > one_if_slower or (spent > budget and k + 1 >= 2):
+        times.append(time.perf_counter() - start)
+        spent += times[-1]
+        if times[-1] > one_if_slower or (spent > budget and k + 1 >= 2):
             break
     return times
 
 
-def bench_mesh(name, cfg, quick, log):
+def build_variants(frames, tris, offset, log):
+    """One warmed-up solver per variant that differs from the default -> (entries, rows of
+    the variants not run: same as the default, no or failing build_pvs)."""
+    defaults = solver_defaults()
+    entries, skipped = [], []
+    for label, kwargs in VARIANTS:
+        pvs = label in PVS_POSES
+        if pvs and not hasattr(hemishadow.TransferSolver, "build_pvs"):
+            log(f"   {label:20s} not measured: this engine's TransferSolver has no build_pvs")
+            continue
+        if kwargs and all(defaults.get(k, object()) == v for k, v in kwargs.items()):
+            skipped.append({"method": label, "kwargs": kwargs, "same_as_default": True})
+            continue
+        start = time.perf_counter()
+        solver = hemishadow.TransferSolver(frames[0], tris, offset=offset, reuse=False, **kwargs)
+        entry = {"label": label, "kwargs": kwargs, "solver": solver, "build_ms": 1e3 * (time.perf_counter() - start),
+                 "pvs_ms": None, "times": [], "blockers": [], "out": {}}
+        if pvs:
+            start = time.perf_counter()
+            try:
+                solver.build_pvs(np.ascontiguousarray(frames[PVS_POSES[label]], np.float32))
+            except Exception as error:  # an engine in the making: say so, keep the run
+                log(f"   {label:20s} not measured: build_pvs(poses (F, N, 3) float32) raised {error!r}")
+                skipped.append({"method": label, "kwargs": kwargs, "failed": repr(error)})
+                continue
+            entry["pvs_ms"] = 1e3 * (time.perf_counter() - start)
+        entries.append(entry)
+    return entries, skipped
+
+
+def hemishadow_rows(frames, tris, normals, offset, order, errors_of, cfg, log):
+    """Every variant timed side by side: frame after frame, each variant solves it in turn
+    (the first one rotating), so a busy spell of the machine hits all variants alike."""
+    entries, skipped = build_variants(frames, tris, offset, log)
+    for e in entries:
+        e["solver"].solve(frames[order[0]], normals[order[0]])  # warm-up
+    spent = 0.0
+    for k, f in enumerate(order):
+        slowest = 0.0
+        for e in entries[k % len(entries):] + entries[:k % len(entries)]:
+            start = time.perf_counter()
+            result = e["solver"].solve(frames[f], normals[f])
+            e["times"].append(time.perf_counter() - start)
+            e["blockers"].append(e["solver"].stats["blockers_per_vertex"])
+            if f in errors_of.frames:
+                e["out"][f] = result
+            slowest = max(slowest, e["times"][-1])
+        spent += sum(e["times"][-1] for e in entries)
+        if slowest > 5.0 or (k + 1 >= 2 and spent > cfg["hemishadow_budget"] * len(entries)):
+            break
+    default_out = next(e["out"] for e in entries if e["label"] == "default")
+    rows = []
+    for e in entries:
+        ms = 1e3 * float(np.median(e["times"]))
+        row = {"method": e["label"], "kwargs": e["kwargs"], "ms": ms, "fps": 1e3 / ms, "frames_timed": len(e["times"]),
+               "build_ms": e["build_ms"], "pvs_ms": e["pvs_ms"], "blockers_per_vertex": float(np.mean(e["blockers"])),
+               "last_stats": {k: v for k, v in e["solver"].stats.items() if isinstance(v, (int, float, bool, str))},
+               "error": errors_of(e["out"], lambda T: (T, T[:, 0] / reference.AO_SCALE)),
+               "identical_to_default": all(np.array_equal(e["out"][f], default_out[f]) for f in e["out"])}
+        rows.append(row)
+        log(f"   {e['label']:20s} {ms:9.2f} ms {row['fps']:8.1f} FPS {row['blockers_per_vertex']:7.0f} blockers  "
+            f"median {row['error']['median']:.4f} mean {row['error']['mean']:.4f}"
+            + ("  (output = default)" if row["identical_to_default"] and e["label"] != "default" else "")
+            + (f"  build_pvs {e['pvs_ms']:.0f} ms" if e["pvs_ms"] is not None else "") + f"  ({len(e['times'])} frames)")
+    for row in skipped:
+        log(f"   {row['method']:20s} " + ("= default" if row.get("same_as_default") else "failed"))
+    order_of = {label: k for k, (label, _) in enumerate(VARIANTS)}
+    return sorted(rows + skipped, key=lambda r: order_of[r["method"]])
+
+
+def embree_rows(pool, frames, tris64, normals, offset, order, errors_of, cfg, log):
+    rows, last_ms = [], None
+    for side in cfg["embree_sides"]:
+        rays = side * side
+        if side * 2 > cfg["reference_side"]:
+            break  # the reference must have at least 4x the rays of any point it judges
+        if len(rows) >= 2 and last_ms * 4 / 1e3 > cfg["embree_cap"]:  # two points at least: a curve
+            log(f"   Embree {rays:5d} rays not run (predicted {last_ms * 4 / 1e3:.0f} s per frame)")
+            break
+        out = {}
+
+        def solve(f):
+            out[f] = pool.solve(frames[f], tris64, normals[f], offset, side, seed=7000 + 31 * side + f)
+
+        times = timed_frames(order, solve, cfg["embree_budget"], one_if_slower=3.0)
+        last_ms = 1e3 * float(np.median(times))
+        row = {"rays": rays, "side": side, "ms": last_ms, "fps": 1e3 / last_ms, "frames_timed": len(times),
+               "error": errors_of(out, lambda r: r)}
+        rows.append(row)
+        log(f"   Embree {rays:5d} rays {last_ms:9.2f} ms {row['fps']:8.1f} FPS  median {row['error']['median']:.4f} "
+            f"mean {row['error']['mean']:.4f}  ({len(times)} frames)")
+    return rows
+
+
+def bench_mesh(pool, name, cfg, quick, log):
     t0 = time.perf_counter()
     load_start = os.getloadavg()[0]
     frames, tris = make_mesh(name, cfg, quick)
     tris64 = tris.astype(np.int64)
-    n_vertices, n_tris = frames.shape[1], len(tris)
+    n_vertices = frames.shape[1]
     normals = np.stack([reference.vertex_normals(f, tris64) for f in frames]).astype(np.float32)
     offset = 1e-3 * reference.mean_edge_length(frames[0], tris64)
-    log(f"\n== {name}: {n_vertices} vertices, {n_tris} triangles, {len(frames)} frames "
+    log(f"\n== {name}: {n_vertices} vertices, {len(tris)} triangles, {len(frames)} frames "
         f"(made in {time.perf_counter() - t0:.1f} s)")
     eval_frames = list(cfg["eval_frames"])
     order = eval_frames + [f for f in range(1, len(frames)) if f not in eval_frames]
-    rng = np.random.default_rng(12345)
-    ids = np.sort(rng.choice(n_vertices, min(cfg["receivers"], n_vertices), replace=False))
-    refs = {}
+    ids = np.sort(np.random.default_rng(12345).choice(n_vertices, min(cfg["receivers"], n_vertices), replace=False))
     start = time.perf_counter()
-    for f in eval_frames:
-        refs[f] = reference.transfer_reference(frames[f], tris64, normals[f], n_side=cfg["n_side"], offset=offset,
-                                               vertex_ids=ids, seed=1000 + f, return_ao=True)
-    log(f"   reference: {len(ids)} receivers x {cfg['n_side'] ** 2} rays x {len(eval_frames)} frames "
+    refs = {f: pool.reference(frames[f], tris64, normals[f], offset, cfg["reference_side"], 1000 * f, ids)
+            for f in eval_frames}
+    log(f"   reference: {len(ids)} receivers x {cfg['reference_side'] ** 2} rays x {len(eval_frames)} frames "
         f"in {time.perf_counter() - start:.1f} s")
-    out = {"load_start": load_start, "vertices": n_vertices, "triangles": n_tris, "frames": len(frames), "eval_frames": eval_frames,
-           "receivers": len(ids), "offset": offset, "hemishadow": [], "embree": [], "cycles": []}
-    # bounding-box diagonal, for the AO distance of Cycles
-    diag = float(np.linalg.norm(np.ptp(frames.reshape(-1, 3), axis=0)))
 
-    # --- hemishadow ------------------------------------------------------------------------
-    default_coarse = None
-    for label, kwargs in VARIANTS:
-        kwargs = dict(kwargs)
-        if label == "exact" and n_vertices > cfg["skip_exact_above"]:
-            log(f"   {label:30s} skipped (same cost as exact + cull on this mesh)")
-            continue
-        if quick and label not in ("exact + cull", DEFAULT, "hierarchy + cull, coarse x4"):
-            continue
-        factor = kwargs.pop("coarse_factor", None)
-        if factor:
-            kwargs["coarse_triangles"] = min(n_tris, factor * default_coarse)
-        start = time.perf_counter()
-        solver = hemishadow.TransferSolver(frames[0], tris, offset=offset, reuse=False, **kwargs)
-        build = time.perf_counter() - start
-        if label == DEFAULT:
-            default_coarse = solver.coarse_triangles
-        solver.solve(frames[0], normals[0])  # warm-up (also builds the plane table once)
-        results, blockers = {}, []
+    def errors_of(out, split):
+        """Mean over the evaluated frames of error_summary on the reference's receivers."""
+        summaries = []
+        for f in eval_frames:
+            if f in out:
+                T, ao = split(out[f])
+                s = reference.error_summary(T[ids], *refs[f])
+                s["ao_mean_abs"] = float(np.abs(np.asarray(ao)[ids] - refs[f][1]).mean())
+                summaries.append(s)
+        return average(summaries)
+
+    errors_of.frames = set(eval_frames)
+
+    result = {"load_start": load_start, "vertices": n_vertices, "triangles": len(tris), "frames": len(frames),
+              "eval_frames": eval_frames, "receivers": len(ids), "offset": offset}
+    result["hemishadow"] = hemishadow_rows(frames, tris, normals, offset, order, errors_of, cfg, log)
+    result["embree"] = embree_rows(pool, frames, tris64, normals, offset, order, errors_of, cfg, log)
+    log(f"   ({time.perf_counter() - t0:.0f} s for {name})")
+    return result
+
+
+def vertex_curve(pool, cfg, log):
+    """Default solve time and Embree's (curve_side^2 rays) against Suzanne's subdivision level."""
+    rows = []
+    for level in cfg["levels"]:
+        predicted = predict_ms(rows)
+        if predicted / 1e3 > cfg["level_cap"]:
+            log(f"   level {level}: not run (predicted {predicted / 1e3:.0f} s per solve)")
+            rows.append({"level": level, "skipped": f"predicted {predicted / 1e3:.0f} s per solve"})
+            break
+        t0 = time.perf_counter()
+        frames, tris = scenes.suzanne(level, n_frames=cfg["level_frames"])
+        tris64 = tris.astype(np.int64)
+        normals = np.stack([reference.vertex_normals(f, tris64) for f in frames]).astype(np.float32)
+        offset = 1e-3 * reference.mean_edge_length(frames[0], tris64)
+        n_vertices = frames.shape[1]
+        made = time.perf_counter() - t0
+        solver = hemishadow.TransferSolver(frames[0], tris, offset=offset, reuse=False)
+        once = n_vertices > cfg["once_above"] or predicted / 1e3 > cfg["warm_up_cap"]
+        if not once:
+            solver.solve(frames[1], normals[1])  # warm-up
+        blockers = []
 
         def solve(f):
-            results[f] = solver.solve(frames[f], normals[f])
+            solver.solve(frames[f], normals[f])
             blockers.append(solver.stats["blockers_per_vertex"])
 
-        times = timed_frames(order, solve, cfg["budget"])
-        errs = [summarize(results[f][ids], results[f][ids, 0] / reference.AO_SCALE, *refs[f])
-                for f in eval_frames if f in results]
+        times = timed_frames(range(1, len(frames)), solve, 0.0 if once else cfg["hemishadow_budget"], 5.0)
         ms = 1e3 * float(np.median(times))
-        bpv = float(np.mean(blockers))
-        row = {"method": label, "ms": ms, "fps": 1e3 / ms, "frames_timed": len(times), "build_ms": build * 1e3,
-               "blockers_per_vertex": bpv, "coarse_triangles": solver.coarse_triangles if kwargs.get("hierarchy", True) else None,
-               "ns_per_triangle": ms * 1e6 * os.cpu_count() / (n_vertices * bpv) if bpv > 0 else float("nan"),
-               "bytes_per_vertex": solver.memory_bytes / n_vertices, "error": average(errs),
-               "ao_first_frame": errs[0]["ao_mean_abs"], "kwargs": kwargs}
-        out["hemishadow"].append(row)
-        log(f"   {label:30s} {ms:9.2f} ms {row['fps']:8.1f} FPS  {bpv:7.0f} blockers  "
-            f"{row['ns_per_triangle']:6.1f} ns/tri  median {row['error']['median']:.4f} mean {row['error']['mean']:.4f} "
-            f"AO abs {row['error']['ao_mean_abs']:.4f}  ({len(times)} frames)")
+        row = {"level": level, "vertices": n_vertices, "triangles": len(tris), "ms": ms, "frames_timed": len(times),
+               "warm_up": not once, "blockers_per_vertex": float(np.mean(blockers)), "embree_ms": None}
+        del solver
+        done = [r for r in rows if r.get("embree_ms")]
+        if level in cfg["embree_levels"] and (not done or done[-1]["embree_ms"] * n_vertices / done[-1]["vertices"]
+                                              < 1e3 * cfg["level_cap"] / 4):
+            side = cfg["curve_side"]
+            e_times = timed_frames(range(1, len(frames)), lambda f: pool.solve(frames[f], tris64, normals[f], offset,
+                                                                                side, seed=f), 0.0, 3.0)
+            row["embree_ms"] = 1e3 * float(np.median(e_times))
+            row["embree_rays"] = side * side
+        rows.append(row)
+        log(f"   level {level}: {n_vertices:7d} vertices {len(tris):8d} triangles  hemishadow {ms:10.1f} ms "
+            f"({1e6 * ms / n_vertices / 1e3:.2f} us/vertex, {len(times)} frames{'' if row['warm_up'] else ', no warm-up'})"
+            + (f"  Embree {row['embree_ms']:10.1f} ms" if row["embree_ms"] else "") + f"  (mesh made in {made:.1f} s)")
+    return rows
 
-    # --- Embree ----------------------------------------------------------------------------
-    peers.EmbreeTransfer(tris64, 16, 0).solve(frames[0], normals[0], offset)  # warm-up
-    for rays in cfg["rays"]:
-        peer = peers.EmbreeTransfer(tris64, rays, seed=777 + rays)
-        results = {}
 
-        def solve(f):
-            results[f] = peer.solve(frames[f], normals[f], offset)
-
-        times = timed_frames(order, solve, cfg["budget"], one_if_slower=30.0)
-        errs = [summarize(results[f][0][ids], results[f][1][ids], *refs[f]) for f in eval_frames if f in results]
-        ms = 1e3 * float(np.median(times))
-        out["embree"].append({"method": f"Embree {rays} rays", "rays": rays, "ms": ms, "fps": 1e3 / ms,
-                              "frames_timed": len(times), "error": average(errs), "ao_first_frame": errs[0]["ao_mean_abs"]})
-        log(f"   Embree {rays:4d} rays {'':15s} {ms:9.2f} ms  median {average(errs)['median']:.4f} "
-            f"mean {average(errs)['mean']:.4f} AO abs {average(errs)['ao_mean_abs']:.4f}")
-
-    # --- Cycles AO bake (first eval frame) ----------------------------------------------
-    f = eval_frames[0]
-    cycles = peers.CyclesAO(frames[f], tris64, normals[f], distance=10.0 * diag)
-    last = None
-    for s in cfg["cycles_samples"]:
-        if last is not None and last[1] * s / last[0] > cfg["cycles_limit"]:  # predicted too slow
-            log(f"   Cycles AO {s:4d} samples skipped (predicted > {cfg['cycles_limit']:.0f} s)")
-            continue
-        sec, ao = cycles.bake(s)
-        last = (s, sec)
-        d = ao[ids] - refs[f][1]
-        out["cycles"].append({"method": f"Cycles AO {s} samples", "samples": s, "ms": sec * 1e3,
-                              "ao_mean_abs": float(np.abs(d).mean()), "ao_median_abs": float(np.median(np.abs(d))),
-                              "ao_bias": float(d.mean())})
-        log(f"   Cycles AO {s:4d} samples {'':10s} {sec * 1e3:9.1f} ms  AO abs {np.abs(d).mean():.4f}")
-    log(f"   ({time.perf_counter() - t0:.0f} s for {name})")
-    return out
+def predict_ms(rows):
+    """The next level's solve time (4x the vertices of the last level run), if the growth of
+    the cost per vertex between the last two levels continues; 0 before two levels ran."""
+    done = [r for r in rows if "ms" in r]
+    if len(done) < 2:
+        return 0.0
+    a, b = done[-2:]
+    per_vertex = b["ms"] / b["vertices"]
+    return 4 * b["ms"] * max(1.0, per_vertex / (a["ms"] / a["vertices"]))
 
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--quick", action="store_true", help="smoke run: small meshes, few rays and samples")
+    parser.add_argument("--quick", action="store_true", help="smoke run: small meshes, few rays")
     parser.add_argument("--meshes", nargs="*", help="only these meshes (names as in the report)")
+    parser.add_argument("--no-curve", action="store_true", help="skip the vertex-count curve")
     parser.add_argument("--no-report", action="store_true", help="write the JSON only")
     args = parser.parse_args()
     cfg = QUICK if args.quick else FULL
-    meshes = args.meshes or cfg["meshes"]
-    info = machine()
+    meshes = cfg["meshes"] if args.meshes is None else args.meshes
 
     def log(msg):
         print(msg, flush=True)
 
-    log(f"{info['cpu']}, {info['cores']} cores, load {info['load_before'][0]:.2f}, {info['date']}")
     start = time.perf_counter()
-    results = {"machine": info, "config": {k: v for k, v in cfg.items()}, "quick": args.quick,
-               "command": ".venv/bin/python bench/run.py" + (" --quick" if args.quick else ""), "meshes": {}}
-    for name in meshes:
-        results["meshes"][name] = bench_mesh(name, cfg, args.quick, log)
+    with peers.EmbreePool() as pool:  # started before anything is timed
+        info = machine()
+        log(f"{info['cpu']}, {info['cores']} cores, load {info['load_before'][0]:.2f}, {info['date']}; "
+            f"engine {info['engine']}; Embree pool of {pool.workers} processes")
+        defaults = solver_defaults()
+        log("TransferSolver defaults: " + ", ".join(f"{k}={v!r}" for k, v in defaults.items()))
+        results = {"machine": info, "config": cfg, "quick": args.quick, "solver_defaults": {k: repr(v) for k, v in defaults.items()},
+                   "pvs_available": hasattr(hemishadow.TransferSolver, "build_pvs"), "embree_workers": pool.workers,
+                   "command": ".venv/bin/python bench/run.py" + (" --quick" if args.quick else ""), "meshes": {}}
+        for name in meshes:
+            results["meshes"][name] = bench_mesh(pool, name, cfg, args.quick, log)
+        if not args.no_curve:
+            log("\n== vertex-count curve (Suzanne subdivision levels)")
+            results["vertex_curve"] = vertex_curve(pool, cfg, log)
     results["machine"]["load_after"] = os.getloadavg()
     results["seconds"] = time.perf_counter() - start
     path = HERE / ("results_quick.json" if args.quick else "results.json")
@@ -244,7 +352,7 @@ def main():
     if not args.no_report:
         import report
 
-        report.main(path, write_docs=not args.quick and not args.meshes)
+        report.main(path, write_docs=not args.quick and args.meshes is None and not args.no_curve)
 
 
 if __name__ == "__main__":

@@ -102,9 +102,10 @@ def suzanne(level, n_frames=7):
     _reset()
     bpy.ops.mesh.primitive_monkey_add(size=2.0)
     obj = bpy.context.object
-    modifier = obj.modifiers.new("Subdivision", "SUBSURF")
-    modifier.levels = level
-    bpy.ops.object.modifier_apply(modifier=modifier.name)
+    if level > 0:  # a level-0 modifier is disabled and cannot be applied
+        modifier = obj.modifiers.new("Subdivision", "SUBSURF")
+        modifier.levels = level
+        bpy.ops.object.modifier_apply(modifier=modifier.name)
     tris = _triangles(obj.data)
     rest = _positions(obj.data, obj.matrix_world).astype(np.float64)
     frames = [rest.astype(np.float32)]
