@@ -32,7 +32,8 @@ pub struct Settings {
     pub table_resolution: usize,
     /// Mask cells per side of an integration block: 4 is the paper's 8x8 grey occlusion term;
     /// 2 and 1 integrate finer (about half and a third of the error, see docs/algorithm.md).
-    /// None: 4 for diffuse, 2 for glossy up to exponent 16 and 1 beyond (see default_downsample).
+    /// None: 1 for diffuse and for glossy beyond exponent 16, 2 for glossy up to it (see
+    /// default_downsample).
     pub downsample: Option<usize>,
 }
 
@@ -49,12 +50,14 @@ impl Default for Settings {
     }
 }
 
-/// Default downsampling of the mask before integration: the paper's 4 x 4 for diffuse
-/// receivers; glossy lobes need 2 x 2 (4 x 4 blocks give 7 % median error at exponent 8),
-/// and lobes sharper than exponent 16 every cell.
+/// Default downsampling of the mask before integration. Diffuse: every cell (not the paper's
+/// 4 x 4 blocks): a third of the error for about 1.3x the time, which Embree would need about
+/// 4x the rays to match (docs/benchmarks.md). Glossy: 2 x 2 blocks up to exponent 16 (4 x 4
+/// give 7 % median error at exponent 8; each block costs a basis evaluation), every cell for
+/// sharper lobes.
 pub fn default_downsample(brdf: Brdf) -> usize {
     match brdf {
-        Brdf::Diffuse => 4,
+        Brdf::Diffuse => 1,
         Brdf::Phong { exponent } if exponent <= 16.0 => 2,
         Brdf::Phong { .. } => 1,
     }
