@@ -179,3 +179,12 @@ def test_loose_vertices_do_not_change_other_vertices(spot):
     with pytest.warns(RuntimeWarning, match="2 vertices"):
         exact = hemishadow.transfer(loose, t)
     assert np.array_equal(exact[:len(v)], hemishadow.transfer(v, t))
+
+
+def test_many_solvers_in_python_objects(spot):
+    """Python allocates objects 16-byte aligned; the solver's 64-byte aligned masks must not
+    live inside them (aligned vector loads crashed about every other solver)."""
+    v, t = spot
+    first = hemishadow.TransferSolver(v, t, bands=3).solve(v)
+    for _ in range(8):
+        np.testing.assert_array_equal(hemishadow.TransferSolver(v, t, bands=3).solve(v), first)

@@ -161,7 +161,9 @@ fn transfer<'py>(
 /// A per-mesh solver for deforming meshes (see `hemishadow.TransferSolver`).
 #[pyclass(name = "Solver", module = "hemishadow._native")]
 struct PySolver {
-    inner: engine::Solver,
+    /// Boxed: Python allocates its objects 16-byte aligned, and the solver holds 64-byte
+    /// aligned masks (read with aligned vector loads).
+    inner: Box<engine::Solver>,
 }
 
 fn view_argument(view: Option<PyReadonlyArray1<f32>>, views: Option<PyReadonlyArray2<f32>>) -> PyResult<Option<engine::View>> {
@@ -199,7 +201,7 @@ impl PySolver {
         let settings = engine::Settings { bands, brdf, view: None, offset, table_resolution, downsample };
         let blockers = engine::Blockers { hierarchy, coarse_triangles, ring, cull, reuse, near_scale };
         let inner = run(py, || engine::Solver::new(&rest, &triangles, &settings, blockers))?;
-        Ok(PySolver { inner })
+        Ok(PySolver { inner: Box::new(inner) })
     }
 
     /// Transfer (N, bands^2) for this frame's positions.
