@@ -15,6 +15,7 @@ pub mod mesh;
 pub mod plane_table;
 pub mod progress;
 pub mod rasterizer;
+pub mod scene;
 pub mod sh;
 pub mod sh_rotation;
 pub mod solver;
