@@ -21,6 +21,9 @@ pub fn cell_directions() -> &'static [Vec3; MASK_CELLS] {
 
 pub type Rgb = [f32; 3];
 
+/// Relative depth difference under which two blockers count as coincident.
+const TIE: f32 = 1e-4;
+
 pub struct DepthSink<'a> {
     table: &'a PlaneTable,
     /// Per mesh, its per-vertex radiance (None: black).
@@ -74,7 +77,10 @@ impl Sink for DepthSink<'_> {
                 bits &= bits - 1;
                 let d = directions[cell];
                 let t = na / dot(normal, d);
-                if !(t > 0.0 && t < self.depth[cell]) {
+                // Coincident faces (a box standing on a floor) tie: the back face wins, so a
+                // receiver inside the box is not let out through the floor.
+                let nearer = t < self.depth[cell] || (back && t <= self.depth[cell] * (1.0 + TIE));
+                if !(t > 0.0 && nearer) {
                     continue; // farther, or a quantised edge cell whose ray misses the plane
                 }
                 self.depth[cell] = t;
