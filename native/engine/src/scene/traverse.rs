@@ -1,7 +1,9 @@
 //! One receiver's walk through the scene hierarchy: instances below its horizon are culled by
 //! their world boxes (top tree), then inside each instance's mesh tree a node is culled when
 //! its box lies below the horizon, drawn through its proxy when its bounding sphere subtends
-//! less than `lod` (radius / distance) as seen from the receiver, and opened otherwise; leaves
+//! less than `lod` (radius / distance) as seen from the receiver or when the receiver is
+//! outside it and the proxy's simplification error subtends less than `lod` x ERROR_SHARE,
+//! and opened otherwise; leaves
 //! that are still close are drawn at full resolution. The receiver never leaves world space
 //! for the tests: each instance gets one 3x4 matrix from mesh space straight into the
 //! receiver's tangent frame, so instances share their geometry and nothing is copied.
@@ -15,6 +17,11 @@ use crate::transfer::Receiver;
 use super::affine::Affine;
 use super::clusters::{Compact, MeshTree, NO_CHILD};
 use super::top::TopTree;
+
+/// A node the receiver is outside of is also drawn through its proxy, however large it looks,
+/// when the proxy's error subtends less than this share of `lod` (flat floors, walls and
+/// gentle terrain near the receiver cost a few proxy triangles instead of every triangle).
+pub const ERROR_SHARE: f32 = 0.1;
 
 /// What a blocker triangle carries besides its corners.
 #[derive(Clone, Copy, Debug)]
@@ -110,6 +117,7 @@ impl Walk<'_> {
         let local = Local::new(receiver, &transform);
         let tag = Tag { mesh, facing: transform.facing };
         let lod2 = self.lod * self.lod;
+        let error2 = (self.lod * ERROR_SHARE).powi(2);
         let stretch2 = transform.stretch * transform.stretch;
         let mut stack: Vec<u32> = Vec::with_capacity(64);
         stack.push(0);
@@ -120,7 +128,9 @@ impl Walk<'_> {
             }
             let s = tree.spheres[n];
             let q = local.apply([s[0], s[1], s[2]]);
-            let far = s[3] * s[3] * stretch2 < lod2 * dot(q, q);
+            let (d2, r2) = (dot(q, q), s[3] * s[3] * stretch2);
+            let e = tree.proxy_error[n];
+            let far = r2 < d2 && (r2 < lod2 * d2 || e * e * stretch2 < error2 * d2);
             let node = tree.nodes[n];
             let leaf = node.children[0] == NO_CHILD;
             if far {
