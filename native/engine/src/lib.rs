@@ -17,6 +17,7 @@ pub mod plane_table;
 pub mod progress;
 pub mod pvs;
 pub mod rasterizer;
+pub mod scene;
 pub mod sh;
 pub mod sh_rotation;
 pub mod solver;

@@ -13,11 +13,13 @@ import numpy as np
 
 from . import _checks, _native
 from .sh import euler_to_matrix, rotate_sh, rotation_matrix, window_sh
+from .scene import Scene
 from .solver import TransferSolver
 
 __all__ = [
     "AO_UNOCCLUDED",
     "Cancelled",
+    "Scene",
     "TransferSolver",
     "ambient_occlusion",
     "disk_cells",

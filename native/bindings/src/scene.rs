@@ -1,0 +1,190 @@
+//! `hemishadow._native.Scene`: the engine's scene visibility (many meshes and instances,
+//! arbitrary receivers) behind a thin class. Shapes and dtypes are checked by the Python
+//! `hemishadow.Scene`; everything is checked again here or in the engine.
+
+use hemishadow_engine as engine;
+use numpy::ndarray::{Array1, Array2, Array3};
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyArray3, PyReadonlyArray1, PyReadonlyArray2};
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+
+use crate::{rows3, run, triangles3, vec3, PyProgress};
+
+#[pyclass(name = "Scene", module = "hemishadow._native")]
+pub struct PyScene {
+    inner: engine::scene::Scene,
+}
+
+fn matrix16(m: &PyReadonlyArray2<f64>) -> PyResult<[f64; 16]> {
+    let view = m.as_array();
+    if view.shape() != [4, 4] {
+        return Err(PyValueError::new_err(format!("matrix must have shape (4, 4), got {:?}", view.shape())));
+    }
+    Ok(std::array::from_fn(|i| view[[i / 4, i % 4]]))
+}
+
+#[pymethods]
+impl PyScene {
+    #[new]
+    fn new() -> Self {
+        PyScene { inner: engine::scene::Scene::new() }
+    }
+
+    fn add_mesh(&mut self, py: Python<'_>, vertices: PyReadonlyArray2<f32>, triangles: PyReadonlyArray2<u32>) -> PyResult<u32> {
+        let (v, t) = (rows3(&vertices, "vertices")?, triangles3(&triangles)?);
+        let inner = &mut self.inner;
+        run(py, || inner.add_mesh(&v, &t))
+    }
+
+    fn add_instance(&mut self, py: Python<'_>, mesh: u32, matrix: PyReadonlyArray2<f64>) -> PyResult<u32> {
+        let m = matrix16(&matrix)?;
+        let inner = &mut self.inner;
+        run(py, || inner.add_instance(mesh, &m))
+    }
+
+    fn set_vertices(&mut self, py: Python<'_>, mesh: u32, vertices: PyReadonlyArray2<f32>) -> PyResult<()> {
+        let v = rows3(&vertices, "vertices")?;
+        let inner = &mut self.inner;
+        run(py, || inner.set_vertices(mesh, &v))
+    }
+
+    fn set_matrix(&mut self, py: Python<'_>, instance: u32, matrix: PyReadonlyArray2<f64>) -> PyResult<()> {
+        let m = matrix16(&matrix)?;
+        let inner = &mut self.inner;
+        run(py, || inner.set_matrix(instance, &m))
+    }
+
+    fn set_radiance(&mut self, py: Python<'_>, mesh: u32, rgb: PyReadonlyArray2<f32>) -> PyResult<()> {
+        let c = rows3(&rgb, "rgb")?;
+        let inner = &mut self.inner;
+        run(py, || inner.set_radiance(mesh, &c))
+    }
+
+    fn set_lod(&mut self, py: Python<'_>, lod: f32) -> PyResult<()> {
+        let inner = &mut self.inner;
+        run(py, || inner.set_lod(lod))
+    }
+
+    #[getter]
+    fn lod(&self) -> f32 {
+        self.inner.lod()
+    }
+
+    /// Builds what is missing (cluster hierarchies, the top tree) now rather than on the first query.
+    fn prepare(&mut self, py: Python<'_>) -> PyResult<()> {
+        let inner = &mut self.inner;
+        run(py, || {
+            inner.prepare();
+            Ok(())
+        })
+    }
+
+    #[getter]
+    fn size(&mut self, py: Python<'_>) -> PyResult<f32> {
+        let inner = &mut self.inner;
+        run(py, || Ok(inner.size()))
+    }
+
+    #[getter]
+    fn mesh_count(&self) -> usize {
+        self.inner.mesh_count()
+    }
+
+    #[getter]
+    fn instance_count(&self) -> usize {
+        self.inner.instance_count()
+    }
+
+    #[getter]
+    fn triangle_count(&self) -> usize {
+        self.inner.triangle_count()
+    }
+
+    /// Triangles handed to the rasterizer per receiver in the last `transfer`.
+    #[getter]
+    fn blockers_per_receiver(&self) -> f64 {
+        self.inner.stats().blockers_per_receiver
+    }
+
+    #[pyo3(signature = (points, normals, bands, exponent, view, views, offset, table_resolution, downsample, progress=None))]
+    #[allow(clippy::too_many_arguments)]
+    fn transfer<'py>(
+        &mut self,
+        py: Python<'py>,
+        points: PyReadonlyArray2<f32>,
+        normals: PyReadonlyArray2<f32>,
+        bands: usize,
+        exponent: Option<f32>,
+        view: Option<PyReadonlyArray1<f32>>,
+        views: Option<PyReadonlyArray2<f32>>,
+        offset: Option<f32>,
+        table_resolution: usize,
+        downsample: Option<usize>,
+        progress: Option<Py<PyAny>>,
+    ) -> PyResult<Bound<'py, PyArray2<f32>>> {
+        let (p, n) = (rows3(&points, "points")?, rows3(&normals, "normals")?);
+        let view = match (view, views) {
+            (Some(v), _) => Some(engine::View::Direction(vec3(&v, "view")?)),
+            (None, Some(v)) => Some(engine::View::PerVertex(rows3(&v, "view")?)),
+            (None, None) => None,
+        };
+        let brdf = exponent.map_or(engine::Brdf::Diffuse, |exponent| engine::Brdf::Phong { exponent });
+        let settings = engine::Settings { bands, brdf, view, offset, table_resolution, downsample };
+        let inner = &mut self.inner;
+        let mut reporter = PyProgress::new(progress);
+        let report = &mut reporter;
+        let result = run(py, || inner.transfer(&p, &n, &settings, &mut |f| report.report(f)));
+        let values = reporter.finish(result)?;
+        let k = bands * bands;
+        Ok(Array2::from_shape_vec((p.len(), k), values).expect("P x k").into_pyarray(py))
+    }
+
+    /// Raw masks (P, 16) uint64.
+    fn visibility<'py>(
+        &mut self,
+        py: Python<'py>,
+        points: PyReadonlyArray2<f32>,
+        normals: PyReadonlyArray2<f32>,
+        offset: Option<f32>,
+    ) -> PyResult<Bound<'py, PyArray2<u64>>> {
+        let (p, n) = (rows3(&points, "points")?, rows3(&normals, "normals")?);
+        let inner = &mut self.inner;
+        let masks = run(py, || inner.visibility(&p, &n, offset))?;
+        let words = engine::disk_mask::MASK_WORDS;
+        let flat: Vec<u64> = masks.iter().flat_map(|m| m.0).collect();
+        Ok(Array2::from_shape_vec((p.len(), words), flat).expect("P x words").into_pyarray(py))
+    }
+
+    fn valid<'py>(
+        &mut self,
+        py: Python<'py>,
+        points: PyReadonlyArray2<f32>,
+        normals: PyReadonlyArray2<f32>,
+        offset: Option<f32>,
+    ) -> PyResult<Bound<'py, PyArray1<bool>>> {
+        let (p, n) = (rows3(&points, "points")?, rows3(&normals, "normals")?);
+        let inner = &mut self.inner;
+        let valid = run(py, || inner.valid(&p, &n, offset))?;
+        Ok(Array1::from_vec(valid).into_pyarray(py))
+    }
+
+    #[pyo3(signature = (points, normals, bands, offset, progress=None))]
+    fn gather<'py>(
+        &mut self,
+        py: Python<'py>,
+        points: PyReadonlyArray2<f32>,
+        normals: Option<PyReadonlyArray2<f32>>,
+        bands: usize,
+        offset: Option<f32>,
+        progress: Option<Py<PyAny>>,
+    ) -> PyResult<Bound<'py, PyArray3<f32>>> {
+        let p = rows3(&points, "points")?;
+        let n = normals.map(|n| rows3(&n, "normals")).transpose()?;
+        let inner = &mut self.inner;
+        let mut reporter = PyProgress::new(progress);
+        let report = &mut reporter;
+        let result = run(py, || inner.gather(&p, n.as_deref(), bands, offset, &mut |f| report.report(f)));
+        let values = reporter.finish(result)?;
+        Ok(Array3::from_shape_vec((p.len(), bands * bands, 3), values).expect("P x k x 3").into_pyarray(py))
+    }
+}

@@ -1,0 +1,340 @@
+//! Per-mesh cluster hierarchy: a bounding-volume tree whose leaves are clusters of nearby
+//! triangles and whose every node carries a simplified proxy of the triangles below it
+//! (hierarchical level of detail in the manner of Nanite's cluster groups, kept as a plain
+//! binary tree). Each node's proxy is simplified from its subtree's triangles with
+//! meshoptimizer's simplifier (edge collapse with locked borders, so neighbouring proxies meet
+//! without cracks; looser when a long border stops it), so their vertices are a subset of the
+//! mesh's: when the mesh deforms (`Scene::set_vertices`) the proxies deform with it and only the
+//! bounds are refitted, nothing is simplified again (the paper's coarse mesh, section 3.2).
+//!
+//! A simplified surface made of a vertex subset lies inside the convex parts it replaces (for
+//! a sphere, an inscribed polyhedron), so a distant crowd of proxies would block too little.
+//! Each proxy vertex is therefore pushed out along the proxy's normal by the simplification
+//! error (meshoptimizer's, accumulated up the tree), recomputed at every refit.
+//!
+//! Everything is in the mesh's own space; instances share one tree.
+
+use rayon::prelude::*;
+
+use crate::mesh::Vec3;
+
+/// Triangles per leaf cluster (at most).
+pub const LEAF_TRIANGLES: usize = 64;
+/// Target size of every node's proxy.
+pub const PROXY_TRIANGLES: usize = 16;
+/// A proxy may keep this many times PROXY_TRIANGLES to keep its borders closed.
+pub const BORDER_LIMIT: usize = 4;
+/// Proxy vertices move out by this fraction of the simplification error.
+pub const PUSH: f32 = 1.0;
+
+/// Triangles over a compact list of mesh vertices, so that a receiver transforms each vertex
+/// once rather than once per corner.
+#[derive(Default, Clone, Debug)]
+pub struct Compact {
+    /// Mesh vertex ids, each once.
+    pub vertices: Vec<u32>,
+    /// Triangles as indices into `vertices`.
+    pub triangles: Vec<[u32; 3]>,
+}
+
+impl Compact {
+    pub fn new(triangles: impl Iterator<Item = [u32; 3]>) -> Self {
+        let mut compact = Compact::default();
+        let mut slot = std::collections::HashMap::new();
+        for tri in triangles {
+            let local = tri.map(|v| {
+                *slot.entry(v).or_insert_with(|| {
+                    compact.vertices.push(v);
+                    (compact.vertices.len() - 1) as u32
+                })
+            });
+            compact.triangles.push(local);
+        }
+        compact
+    }
+
+    /// The triangles over mesh vertex ids.
+    pub fn mesh_triangles(&self) -> impl Iterator<Item = [u32; 3]> + '_ {
+        self.triangles.iter().map(|t| t.map(|i| self.vertices[i as usize]))
+    }
+}
+
+pub const NO_CHILD: u32 = u32::MAX;
+
+#[derive(Clone, Copy, Debug)]
+pub struct Node {
+    /// Children (both NO_CHILD for a leaf).
+    pub children: [u32; 2],
+    /// For a leaf, its index in `leaves`.
+    pub leaf: u32,
+}
+
+/// The tree of one mesh: node 0 is the root, parents come before their children.
+pub struct MeshTree {
+    pub nodes: Vec<Node>,
+    pub leaves: Vec<Compact>,
+    /// One proxy per node.
+    pub proxies: Vec<Compact>,
+    /// Per node, how far its proxy may lie inside the surface it stands for (mesh units).
+    pub proxy_error: Vec<f32>,
+    /// Per node, its proxy's vertices (in `proxies[n].vertices` order) pushed out by the error.
+    pub proxy_positions: Vec<Vec<Vec3>>,
+    /// Per node, its box in mesh space (refitted by `refit`).
+    pub bounds: Vec<[Vec3; 2]>,
+    /// Per node, the centre of its box and half its diagonal.
+    pub spheres: Vec<[f32; 4]>,
+    pub largest_compact: usize,
+}
+
+impl MeshTree {
+    pub fn build(positions: &[Vec3], triangles: &[[u32; 3]]) -> MeshTree {
+        let centroids: Vec<Vec3> = triangles.iter().map(|t| centroid(positions, t)).collect();
+        let mut order: Vec<u32> = (0..triangles.len() as u32).collect();
+        let mut nodes = Vec::new();
+        let mut leaf_ranges = Vec::new();
+        let mut ranges = Vec::new();
+        split(&centroids, &mut order, 0, &mut nodes, &mut leaf_ranges, &mut ranges);
+        let leaves: Vec<Compact> =
+            leaf_ranges.iter().map(|&(s, e)| Compact::new(order[s..e].iter().map(|&t| triangles[t as usize]))).collect();
+        let subtree = |n: usize| order[ranges[n].0..ranges[n].1].iter().map(|&t| triangles[t as usize]).collect::<Vec<_>>();
+        let (proxies, proxy_error): (Vec<Compact>, Vec<f32>) = (0..nodes.len())
+            .into_par_iter()
+            .map(|n| {
+                let (tris, error) = simplify(positions, &subtree(n), PROXY_TRIANGLES);
+                (Compact::new(tris.into_iter()), PUSH * error)
+            })
+            .unzip();
+        let largest_compact = leaves.iter().chain(&proxies).map(|c| c.vertices.len()).max().unwrap_or(0);
+        let mut tree = MeshTree {
+            nodes,
+            leaves,
+            proxies,
+            proxy_error,
+            proxy_positions: Vec::new(),
+            bounds: Vec::new(),
+            spheres: Vec::new(),
+            largest_compact,
+        };
+        tree.refit(positions);
+        tree
+    }
+
+    /// Recomputes every node's box and pushed-out proxy from this frame's positions.
+    pub fn refit(&mut self, positions: &[Vec3]) {
+        self.proxy_positions =
+            self.proxies.par_iter().zip(&self.proxy_error).map(|(p, &e)| pushed_out(positions, p, e)).collect();
+        let mut bounds = vec![EMPTY_BOX; self.nodes.len()];
+        for n in (0..self.nodes.len()).rev() {
+            let node = self.nodes[n];
+            bounds[n] = if node.children[0] == NO_CHILD {
+                box_of(self.leaves[node.leaf as usize].vertices.iter().map(|&v| positions[v as usize]))
+            } else {
+                union(&bounds[node.children[0] as usize], &bounds[node.children[1] as usize])
+            };
+            bounds[n] = union(&bounds[n], &box_of(self.proxy_positions[n].iter().copied()));
+        }
+        self.spheres = bounds.iter().map(sphere_of).collect();
+        self.bounds = bounds;
+    }
+
+    pub fn triangle_count(&self) -> usize {
+        self.leaves.iter().map(|l| l.triangles.len()).sum()
+    }
+}
+
+pub const EMPTY_BOX: [Vec3; 2] = [[f32::INFINITY; 3], [f32::NEG_INFINITY; 3]];
+
+pub fn box_of(points: impl Iterator<Item = Vec3>) -> [Vec3; 2] {
+    let mut b = EMPTY_BOX;
+    for p in points {
+        for a in 0..3 {
+            b[0][a] = b[0][a].min(p[a]);
+            b[1][a] = b[1][a].max(p[a]);
+        }
+    }
+    b
+}
+
+pub fn union(a: &[Vec3; 2], b: &[Vec3; 2]) -> [Vec3; 2] {
+    [[0, 1, 2].map(|i| a[0][i].min(b[0][i])), [0, 1, 2].map(|i| a[1][i].max(b[1][i]))]
+}
+
+pub fn sphere_of(b: &[Vec3; 2]) -> [f32; 4] {
+    let c = [0, 1, 2].map(|a| 0.5 * (b[0][a] + b[1][a]));
+    let r = [0, 1, 2].map(|a| 0.5 * (b[1][a] - b[0][a])).iter().map(|d| d * d).sum::<f32>().sqrt();
+    [c[0], c[1], c[2], r]
+}
+
+fn centroid(positions: &[Vec3], t: &[u32; 3]) -> Vec3 {
+    let [a, b, c] = t.map(|i| positions[i as usize]);
+    [0, 1, 2].map(|k| (a[k] + b[k] + c[k]) / 3.0)
+}
+
+/// Median split of `order` along the longest axis of its centroids' box, down to leaves of at
+/// most LEAF_TRIANGLES; appends nodes in pre-order and returns the subtree's root.
+fn split(
+    centroids: &[Vec3],
+    order: &mut [u32],
+    offset: usize,
+    nodes: &mut Vec<Node>,
+    leaves: &mut Vec<(usize, usize)>,
+    ranges: &mut Vec<(usize, usize)>,
+) -> u32 {
+    let id = nodes.len() as u32;
+    nodes.push(Node { children: [NO_CHILD; 2], leaf: NO_CHILD });
+    ranges.push((offset, offset + order.len()));
+    if order.len() <= LEAF_TRIANGLES {
+        nodes[id as usize].leaf = leaves.len() as u32;
+        leaves.push((offset, offset + order.len()));
+        return id;
+    }
+    let b = box_of(order.iter().map(|&t| centroids[t as usize]));
+    let axis = (0..3).max_by(|&i, &j| (b[1][i] - b[0][i]).total_cmp(&(b[1][j] - b[0][j]))).unwrap_or(0);
+    let mid = order.len() / 2;
+    order.select_nth_unstable_by(mid, |&x, &y| centroids[x as usize][axis].total_cmp(&centroids[y as usize][axis]));
+    let (left, right) = order.split_at_mut(mid);
+    let l = split(centroids, left, offset, nodes, leaves, ranges);
+    let r = split(centroids, right, offset + mid, nodes, leaves, ranges);
+    nodes[id as usize].children = [l, r];
+    id
+}
+
+/// A proxy's vertices moved `error` along the area-weighted normals of the proxy's triangles.
+fn pushed_out(positions: &[Vec3], proxy: &Compact, error: f32) -> Vec<Vec3> {
+    let mut normals = vec![[0.0f32; 3]; proxy.vertices.len()];
+    for t in &proxy.triangles {
+        let [a, b, c] = t.map(|k| positions[proxy.vertices[k as usize] as usize]);
+        let n = crate::rasterizer::cross(crate::mesh::sub(b, a), crate::mesh::sub(c, a));
+        for &k in t {
+            normals[k as usize] = crate::mesh::add(normals[k as usize], n);
+        }
+    }
+    proxy
+        .vertices
+        .iter()
+        .zip(normals)
+        .map(|(&v, n)| {
+            let p = positions[v as usize];
+            match crate::mesh::normalize(n) {
+                Some(n) if error > 0.0 => [0, 1, 2].map(|a| p[a] + error * n[a]),
+                _ => p,
+            }
+        })
+        .collect()
+}
+
+/// At most about `target` triangles over a subset of the given triangles' vertices: edge
+/// collapse first (keeps the surface), sloppy vertex clustering when that stalls, and the
+/// largest triangles when even that returns nothing (tiny or degenerate sets). Also returns
+/// the simplifier's error in mesh units.
+pub fn simplify(positions: &[Vec3], triangles: &[[u32; 3]], target: usize) -> (Vec<[u32; 3]>, f32) {
+    if triangles.len() <= target {
+        return (triangles.to_vec(), 0.0);
+    }
+    let compact = Compact::new(triangles.iter().copied());
+    let local: Vec<Vec3> = compact.vertices.iter().map(|&v| positions[v as usize]).collect();
+    let indices: Vec<u32> = compact.triangles.iter().flatten().copied().collect();
+    let mut error = 0.0f32;
+    // Locked borders keep neighbouring proxies (and a proxy next to full-resolution triangles)
+    // closed along their seams: free borders shrink apart and leave cracks that leak light.
+    // Long borders stop the reduction; then the free-border result, then sloppy clustering.
+    let mut kept = meshopt::simplify_decoder(&indices, &local, target * 3, 1.0, meshopt::SimplifyOptions::LockBorder, Some(&mut error));
+    if kept.len() > BORDER_LIMIT * target * 3 {
+        kept = meshopt::simplify_decoder(&indices, &local, target * 3, 1.0, meshopt::SimplifyOptions::None, Some(&mut error));
+    }
+    if kept.len() > BORDER_LIMIT * target * 3 {
+        kept = meshopt::simplify_sloppy_decoder(&indices, &local, target * 3, 1.0, Some(&mut error));
+    }
+    // meshoptimizer reports errors relative to the largest side of the points' box.
+    let b = box_of(local.iter().copied());
+    let extent = (0..3).map(|a| b[1][a] - b[0][a]).fold(0.0f32, f32::max);
+    let error = error * extent;
+    let mut result: Vec<[u32; 3]> = kept.chunks_exact(3).map(|t| [0, 1, 2].map(|k| compact.vertices[t[k] as usize])).collect();
+    if result.is_empty() {
+        let area = |t: &[u32; 3]| {
+            let [a, b, c] = t.map(|i| positions[i as usize]);
+            crate::mesh::length(crate::rasterizer::cross(crate::mesh::sub(b, a), crate::mesh::sub(c, a)))
+        };
+        result = triangles.to_vec();
+        result.sort_by(|x, y| area(y).total_cmp(&area(x)));
+        result.truncate(target);
+    }
+    (result, error)
+}
+
+#[cfg(test)]
+pub mod tests_support {
+    use crate::mesh::Vec3;
+
+    /// UV sphere of radius 1: n rings x 2n segments, wound outwards.
+    pub fn sphere(n: usize) -> (Vec<Vec3>, Vec<[u32; 3]>) {
+        let mut v = vec![[0.0, 0.0, 1.0]];
+        for i in 1..n {
+            let th = std::f32::consts::PI * i as f32 / n as f32;
+            for j in 0..2 * n {
+                let ph = std::f32::consts::PI * j as f32 / n as f32;
+                v.push([th.sin() * ph.cos(), th.sin() * ph.sin(), th.cos()]);
+            }
+        }
+        v.push([0.0, 0.0, -1.0]);
+        let ring = |i: usize, j: usize| (1 + (i - 1) * 2 * n + j % (2 * n)) as u32;
+        let last = (v.len() - 1) as u32;
+        let mut t = Vec::new();
+        for j in 0..2 * n {
+            t.push([0, ring(1, j), ring(1, j + 1)]);
+            t.push([last, ring(n - 1, j + 1), ring(n - 1, j)]);
+        }
+        for i in 1..n - 1 {
+            for j in 0..2 * n {
+                t.push([ring(i, j), ring(i + 1, j), ring(i + 1, j + 1)]);
+                t.push([ring(i, j), ring(i + 1, j + 1), ring(i, j + 1)]);
+            }
+        }
+        (v, t)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::tests_support::sphere;
+    use super::*;
+
+    #[test]
+    fn leaves_hold_every_triangle_once() {
+        let (v, t) = sphere(40);
+        let tree = MeshTree::build(&v, &t);
+        assert_eq!(tree.triangle_count(), t.len());
+        let mut seen: Vec<[u32; 3]> = tree.leaves.iter().flat_map(|l| l.mesh_triangles()).collect();
+        let mut expected = t.clone();
+        seen.sort();
+        expected.sort();
+        assert_eq!(seen, expected);
+        assert!(tree.leaves.iter().all(|l| l.triangles.len() <= LEAF_TRIANGLES));
+    }
+
+    #[test]
+    fn proxies_are_small_and_inside_their_node() {
+        let (v, t) = sphere(40);
+        let tree = MeshTree::build(&v, &t);
+        for (n, proxy) in tree.proxies.iter().enumerate() {
+            assert!(!proxy.triangles.is_empty() && proxy.triangles.len() <= BORDER_LIMIT * PROXY_TRIANGLES, "node {n}: {}", proxy.triangles.len());
+            let b = tree.bounds[n];
+            for p in &tree.proxy_positions[n] {
+                assert!((0..3).all(|a| p[a] >= b[0][a] && p[a] <= b[1][a]));
+            }
+        }
+        assert!(tree.proxies[0].triangles.len() <= PROXY_TRIANGLES * 3 / 2);
+    }
+
+    #[test]
+    fn refit_follows_moved_vertices() {
+        let (mut v, t) = sphere(20);
+        let mut tree = MeshTree::build(&v, &t);
+        v.iter_mut().for_each(|p| p[0] += 5.0);
+        tree.refit(&v);
+        let leaf = tree.nodes.iter().position(|n| n.children[0] == NO_CHILD).unwrap();
+        let expected = box_of(tree.leaves[tree.nodes[leaf].leaf as usize].vertices.iter().map(|&i| v[i as usize]));
+        assert_eq!(tree.bounds[leaf], union(&expected, &box_of(tree.proxy_positions[leaf].iter().copied())));
+        assert!(tree.bounds[0][0][0] > 3.0 && tree.bounds[0][1][0] > 5.99);
+    }
+}

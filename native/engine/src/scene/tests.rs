@@ -1,0 +1,184 @@
+//! Scene-level checks on tiny hand-built scenes with known answers.
+
+use super::*;
+use crate::transfer::Settings;
+
+const IDENTITY: [f64; 16] = [1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0];
+
+fn translate(x: f64, y: f64, z: f64) -> [f64; 16] {
+    let mut m = IDENTITY;
+    (m[3], m[7], m[11]) = (x, y, z);
+    m
+}
+
+/// Unit cube centred at the origin, faces wound outwards.
+fn cube() -> (Vec<Vec3>, Vec<[u32; 3]>) {
+    let v: Vec<Vec3> = (0..8).map(|i| [(i & 1) as f32 - 0.5, ((i >> 1) & 1) as f32 - 0.5, ((i >> 2) & 1) as f32 - 0.5]).collect();
+    let quads = [[0, 2, 3, 1], [4, 5, 7, 6], [0, 1, 5, 4], [2, 6, 7, 3], [0, 4, 6, 2], [1, 3, 7, 5]];
+    let t = quads.iter().flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]]).collect();
+    (v, t)
+}
+
+/// A square of side 2 * half in the plane z = 0, facing +Z, n x n quads.
+fn floor(half: f32, n: usize) -> (Vec<Vec3>, Vec<[u32; 3]>) {
+    let mut v = Vec::new();
+    for j in 0..=n {
+        for i in 0..=n {
+            v.push([-half + 2.0 * half * i as f32 / n as f32, -half + 2.0 * half * j as f32 / n as f32, 0.0]);
+        }
+    }
+    let mut t = Vec::new();
+    for j in 0..n {
+        for i in 0..n {
+            let a = (j * (n + 1) + i) as u32;
+            let w = (n + 1) as u32;
+            t.push([a, a + 1, a + w + 1]);
+            t.push([a, a + w + 1, a + w]);
+        }
+    }
+    (v, t)
+}
+
+fn ao(scene: &mut Scene, p: Vec3, n: Vec3) -> f32 {
+    let t = scene.transfer(&[p], &[n], &Settings::default(), &mut |_| true).unwrap();
+    t[0] / 0.886_227
+}
+
+#[test]
+fn open_receiver_is_unoccluded_and_roof_blocks() {
+    let mut scene = Scene::new();
+    let (v, t) = floor(50.0, 4);
+    let m = scene.add_mesh(&v, &t).unwrap();
+    scene.add_instance(m, &IDENTITY).unwrap();
+    assert!((ao(&mut scene, [0.0, 0.0, 0.0], [0.0, 0.0, 1.0]) - 1.0).abs() < 1e-4);
+    // The same floor turned over and lifted is a roof.
+    let roof = [1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, -1.0, 1.0, 0.0, 0.0, 0.0, 1.0];
+    scene.add_instance(m, &roof).unwrap();
+    assert!(ao(&mut scene, [0.0, 0.0, 0.0], [0.0, 0.0, 1.0]) < 0.03);
+}
+
+#[test]
+fn inside_a_closed_mesh_is_invalid_and_an_open_corner_is_not() {
+    let mut scene = Scene::new();
+    let (v, t) = cube();
+    let c = scene.add_mesh(&v, &t).unwrap();
+    scene.add_instance(c, &translate(0.0, 0.0, 0.5)).unwrap();
+    let (fv, ft) = floor(5.0, 8);
+    let f = scene.add_mesh(&fv, &ft).unwrap();
+    scene.add_instance(f, &IDENTITY).unwrap();
+    let points = [[0.1, 0.2, 0.5], [0.0, 0.0, 0.001], [0.52, 0.0, 0.0], [0.6, 0.6, 0.0], [3.0, 3.0, 0.0]];
+    let normals = [[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, 0.0, 1.0], [0.0, 0.0, 1.0]];
+    let valid = scene.valid(&points, &normals, None).unwrap();
+    assert_eq!(valid, vec![false, false, true, true, true]);
+}
+
+#[test]
+fn mirrored_instance_keeps_its_inside_invalid() {
+    let mut scene = Scene::new();
+    let (v, t) = cube();
+    let c = scene.add_mesh(&v, &t).unwrap();
+    let mirror = [-2.0, 0.0, 0.0, 3.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0];
+    scene.add_instance(c, &mirror).unwrap();
+    let valid = scene.valid(&[[3.2, 0.1, 0.0], [3.2, 0.1, 0.0], [5.0, 0.0, 0.0]], &[[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [-1.0, 0.0, 0.0]], None).unwrap();
+    assert_eq!(valid, vec![false, false, true]);
+}
+
+#[test]
+fn instance_equals_a_transformed_copy() {
+    let (v, t) = floor(1.0, 6);
+    let m = [0.0, -2.0, 0.0, 0.5, 1.0, 0.0, 0.0, 0.2, 0.0, 0.0, 1.0, 1.0, 0.0, 0.0, 0.0, 1.0];
+    let mut shared = Scene::new();
+    let id = shared.add_mesh(&v, &t).unwrap();
+    shared.add_instance(id, &m).unwrap();
+    let moved: Vec<Vec3> = v.iter().map(|p| [0.5 - 2.0 * p[1], 0.2 + p[0], 1.0 + p[2]]).collect();
+    let mut copied = Scene::new();
+    let id = copied.add_mesh(&moved, &t).unwrap();
+    copied.add_instance(id, &IDENTITY).unwrap();
+    let points = [[0.0, 0.0, 0.0], [0.3, -0.2, 0.5], [1.5, 0.0, 0.2]];
+    let normals = [[0.0, 0.0, 1.0], [0.3, 0.1, 1.0], [-1.0, 0.0, 0.2]];
+    let s = Settings::default();
+    let a = shared.transfer(&points, &normals, &s, &mut |_| true).unwrap();
+    let b = copied.transfer(&points, &normals, &s, &mut |_| true).unwrap();
+    assert!(a.iter().zip(&b).all(|(x, y)| (x - y).abs() < 1e-3), "{a:?}\n{b:?}");
+}
+
+#[test]
+fn set_vertices_and_set_matrix_match_a_fresh_scene() {
+    let (v, t) = floor(1.0, 6);
+    let lifted: Vec<Vec3> = v.iter().map(|p| [p[0], p[1], 0.5 + 0.1 * p[0]]).collect();
+    let mut live = Scene::new();
+    let id = live.add_mesh(&v, &t).unwrap();
+    let inst = live.add_instance(id, &IDENTITY).unwrap();
+    let points = [[0.0, 0.0, 0.0], [0.5, 0.5, 0.0]];
+    let normals = [[0.0, 0.0, 1.0]; 2];
+    let s = Settings::default();
+    live.transfer(&points, &normals, &s, &mut |_| true).unwrap();
+    live.set_vertices(id, &lifted).unwrap();
+    live.set_matrix(inst, &translate(0.2, 0.0, 0.3)).unwrap();
+    let a = live.transfer(&points, &normals, &s, &mut |_| true).unwrap();
+    let mut fresh = Scene::new();
+    let id = fresh.add_mesh(&lifted, &t).unwrap();
+    fresh.add_instance(id, &translate(0.2, 0.0, 0.3)).unwrap();
+    let b = fresh.transfer(&points, &normals, &s, &mut |_| true).unwrap();
+    assert!(a.iter().zip(&b).all(|(x, y)| (x - y).abs() < 1e-4));
+    assert!(a[0] < 0.8 * 0.886, "the lifted floor shadows the receiver: {}", a[0]);
+}
+
+#[test]
+fn bad_ids_and_shapes_are_errors() {
+    let mut scene = Scene::new();
+    let (v, t) = cube();
+    assert!(scene.add_instance(0, &IDENTITY).is_err());
+    let id = scene.add_mesh(&v, &t).unwrap();
+    assert!(scene.add_mesh(&v, &[[0, 1, 8]]).is_err());
+    assert!(scene.set_vertices(id, &v[..7]).is_err());
+    assert!(scene.set_matrix(0, &IDENTITY).is_err());
+    assert!(scene.set_radiance(id, &[[1.0; 3]; 3]).is_err());
+    scene.add_instance(id, &IDENTITY).unwrap();
+    assert!(scene.transfer(&[[0.0; 3]], &[[0.0; 3]], &Settings::default(), &mut |_| true).is_err());
+    assert!(scene.transfer(&[[f32::NAN, 0.0, 0.0]], &[[0.0, 0.0, 1.0]], &Settings::default(), &mut |_| true).is_err());
+}
+
+#[test]
+fn gather_inside_a_glowing_box_sees_it_all_around() {
+    let mut scene = Scene::new();
+    let (v, t) = cube();
+    let id = scene.add_mesh(&v, &t).unwrap();
+    scene.add_instance(id, &IDENTITY).unwrap();
+    scene.set_radiance(id, &vec![[1.0, 0.5, 0.0]; v.len()]).unwrap();
+    let g = scene.gather(&[[0.1, 0.0, -0.1]], None, 3, None, &mut |_| true).unwrap();
+    let full = 4.0 * std::f32::consts::PI * 0.282_095;
+    assert!((g[0] - full).abs() < 0.03 * full, "{}", g[0]);
+    assert!((g[1] - 0.5 * full).abs() < 0.03 * full && g[2].abs() < 1e-6);
+    assert!(g[3..].iter().all(|c| c.abs() < 0.03 * full), "{g:?}");
+    // A hemisphere facing +Z sees half of it.
+    let h = scene.gather(&[[0.0, 0.0, 0.0]], Some(&[[0.0, 0.0, 1.0]]), 1, None, &mut |_| true).unwrap();
+    assert!((h[0] - 0.5 * full).abs() < 0.03 * full, "{}", h[0]);
+}
+
+#[test]
+fn proxies_keep_a_distant_crowd_close_to_full_resolution() {
+    let (v, t) = clusters::tests_support::sphere(24);
+    let mut scene = Scene::new();
+    let id = scene.add_mesh(&v, &t).unwrap();
+    for i in 0..10 {
+        for j in 0..10 {
+            scene.add_instance(id, &translate(3.0 * i as f64 - 13.5, 3.0 * j as f64 + 4.0, 0.8)).unwrap();
+        }
+    }
+    let points = [[0.0, 0.0, 0.0], [2.0, 1.0, 0.0]];
+    let normals = [[0.0, 1.0, 0.3], [0.0, 0.0, 1.0]];
+    let s = Settings::default();
+    let lod = scene.transfer(&points, &normals, &s, &mut |_| true).unwrap();
+    let with_lod = scene.stats().blockers_per_receiver;
+    scene.set_lod(0.0).unwrap();
+    let exact = scene.transfer(&points, &normals, &s, &mut |_| true).unwrap();
+    let without = scene.stats().blockers_per_receiver;
+    assert!(with_lod < 0.25 * without, "{with_lod} vs {without}");
+    // A hundred spheres all around the receiver, the far ones a cell or two wide: the harshest
+    // case for proxies, which let through about 0.04 of AO here (measured 0.749 vs 0.709).
+    for r in 0..2 {
+        let (a, b) = (lod[r * 25] / 0.886_227, exact[r * 25] / 0.886_227);
+        assert!((a - b).abs() < 0.05, "receiver {r}: AO {a} vs {b}");
+    }
+}

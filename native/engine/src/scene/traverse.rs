@@ -1,0 +1,196 @@
+//! One receiver's walk through the scene hierarchy: instances below its horizon are culled by
+//! their world boxes (top tree), then inside each instance's mesh tree a node is culled when
+//! its box lies below the horizon, drawn through its proxy when its bounding sphere subtends
+//! less than `lod` (radius / distance) as seen from the receiver or when the receiver is
+//! outside it and the proxy's simplification error subtends less than `lod` x ERROR_SHARE,
+//! and opened otherwise; leaves
+//! that are still close are drawn at full resolution. The receiver never leaves world space
+//! for the tests: each instance gets one 3x4 matrix from mesh space straight into the
+//! receiver's tangent frame, so instances share their geometry and nothing is copied.
+
+use crate::disk_mask::Mask;
+use crate::mesh::Vec3;
+use crate::plane_table::PlaneTable;
+use crate::rasterizer::{above_horizon, dot, TriangleBatch};
+use crate::transfer::Receiver;
+
+use super::affine::Affine;
+use super::clusters::{Compact, MeshTree, NO_CHILD};
+use super::top::TopTree;
+
+/// A node the receiver is outside of is also drawn through its proxy, however large it looks,
+/// when the proxy's error subtends less than this share of `lod` (flat floors, walls and
+/// gentle terrain near the receiver cost a few proxy triangles instead of every triangle).
+pub const ERROR_SHARE: f32 = 0.1;
+
+/// What a blocker triangle carries besides its corners.
+#[derive(Clone, Copy, Debug)]
+pub struct Tag {
+    pub mesh: u32,
+    /// -1 for an instance with a negative determinant: its winding is turned over.
+    pub facing: f32,
+}
+
+/// Receives the blocker triangles of one receiver, in its tangent frame, corners above the
+/// horizon only. `ids` are the corners' mesh vertex ids.
+pub trait Sink {
+    fn triangle(&mut self, a: Vec3, b: Vec3, c: Vec3, ids: [u32; 3], tag: Tag);
+    /// True when nothing more can change the result (stops the walk early).
+    fn done(&self) -> bool {
+        false
+    }
+}
+
+/// The parts of a prepared scene a walk reads.
+pub struct Walk<'a> {
+    pub trees: &'a [&'a MeshTree],
+    pub positions: &'a [&'a [Vec3]],
+    pub instances: &'a [(u32, Affine)],
+    pub top: &'a TopTree,
+    pub lod: f32,
+}
+
+/// A mesh-space to receiver-space map: rows of (frame x linear), and the translation.
+struct Local {
+    rows: [Vec3; 3],
+    shift: Vec3,
+}
+
+impl Local {
+    fn new(receiver: &Receiver, t: &Affine) -> Local {
+        let f = [receiver.frame.t, receiver.frame.b, receiver.frame.n];
+        let l = &t.linear;
+        let rows = f.map(|fr| [0, 1, 2].map(|c| fr[0] * l[0][c] + fr[1] * l[1][c] + fr[2] * l[2][c]));
+        let d = crate::mesh::sub(t.translation, receiver.origin);
+        Local { rows, shift: f.map(|fr| dot(fr, d)) }
+    }
+
+    #[inline(always)]
+    fn apply(&self, p: Vec3) -> Vec3 {
+        [0, 1, 2].map(|r| dot(self.rows[r], p) + self.shift[r])
+    }
+
+    /// Whether a mesh-space box lies on or below the receiver's horizon.
+    #[inline(always)]
+    fn below(&self, b: &[Vec3; 2]) -> bool {
+        let z = self.rows[2];
+        let top: f32 = (0..3).map(|c| (z[c] * b[0][c]).max(z[c] * b[1][c])).sum();
+        top + self.shift[2] <= 0.0
+    }
+}
+
+/// Whether a world box lies on or below the receiver's tangent plane.
+#[inline(always)]
+pub fn below_horizon(receiver: &Receiver, b: &[Vec3; 2]) -> bool {
+    let n = receiver.frame.n;
+    let top = [0, 1, 2].map(|a| if n[a] >= 0.0 { b[1][a] } else { b[0][a] });
+    dot(n, top) <= dot(n, receiver.origin)
+}
+
+impl Walk<'_> {
+    /// Feeds `sink` every blocker of `receiver`; `scratch` holds transformed vertices.
+    pub fn run<S: Sink>(&self, receiver: &Receiver, scratch: &mut Vec<Vec3>, sink: &mut S) {
+        let mut stack: Vec<u32> = Vec::with_capacity(64);
+        if self.top.nodes.is_empty() {
+            return;
+        }
+        stack.push(0);
+        while let Some(n) = stack.pop() {
+            if below_horizon(receiver, &self.top.bounds[n as usize]) {
+                continue;
+            }
+            let node = self.top.nodes[n as usize];
+            if node.children[0] != NO_CHILD {
+                stack.extend_from_slice(&node.children);
+                continue;
+            }
+            self.instance(receiver, node.instance as usize, scratch, sink);
+            if sink.done() {
+                return;
+            }
+        }
+    }
+
+    fn instance<S: Sink>(&self, receiver: &Receiver, i: usize, scratch: &mut Vec<Vec3>, sink: &mut S) {
+        let (mesh, transform) = self.instances[i];
+        let (tree, positions) = (self.trees[mesh as usize], self.positions[mesh as usize]);
+        let local = Local::new(receiver, &transform);
+        let tag = Tag { mesh, facing: transform.facing };
+        let lod2 = self.lod * self.lod;
+        let error2 = (self.lod * ERROR_SHARE).powi(2);
+        let stretch2 = transform.stretch * transform.stretch;
+        let mut stack: Vec<u32> = Vec::with_capacity(64);
+        stack.push(0);
+        while let Some(n) = stack.pop() {
+            let n = n as usize;
+            if local.below(&tree.bounds[n]) {
+                continue;
+            }
+            let s = tree.spheres[n];
+            let q = local.apply([s[0], s[1], s[2]]);
+            let (d2, r2) = (dot(q, q), s[3] * s[3] * stretch2);
+            let e = tree.proxy_error[n];
+            let far = r2 < d2 && (r2 < lod2 * d2 || e * e * stretch2 < error2 * d2);
+            let node = tree.nodes[n];
+            let leaf = node.children[0] == NO_CHILD;
+            if far {
+                let pushed = &tree.proxy_positions[n];
+                emit(&local, |k| pushed[k], &tree.proxies[n], tag, scratch, sink);
+            } else if leaf {
+                let compact = &tree.leaves[node.leaf as usize];
+                emit(&local, |k| positions[compact.vertices[k] as usize], compact, tag, scratch, sink);
+            }
+            if far || leaf {
+                if sink.done() {
+                    return;
+                }
+            } else {
+                stack.extend_from_slice(&node.children);
+            }
+        }
+    }
+}
+
+#[inline(always)]
+fn emit<S: Sink>(local: &Local, position: impl Fn(usize) -> Vec3, compact: &Compact, tag: Tag, scratch: &mut Vec<Vec3>, sink: &mut S) {
+    scratch.clear();
+    scratch.extend((0..compact.vertices.len()).map(|k| local.apply(position(k))));
+    for tri in &compact.triangles {
+        let [a, b, c] = tri.map(|k| scratch[k as usize]);
+        if above_horizon(a, b, c) {
+            sink.triangle(a, b, c, tri.map(|k| compact.vertices[k as usize]), tag);
+        }
+    }
+}
+
+/// The plain visibility mask (occluder fusion, any order), through the rasterizer's batches.
+pub struct MaskSink<'a> {
+    table: &'a PlaneTable,
+    batch: TriangleBatch,
+    pub mask: Mask,
+    full: Mask,
+    pub triangles: u64,
+}
+
+impl<'a> MaskSink<'a> {
+    pub fn new(table: &'a PlaneTable, full: Mask) -> Self {
+        MaskSink { table, batch: TriangleBatch::default(), mask: Mask::EMPTY, full, triangles: 0 }
+    }
+
+    pub fn finish(mut self) -> (Mask, u64) {
+        self.batch.finish(self.table, &mut self.mask);
+        (self.mask, self.triangles)
+    }
+}
+
+impl Sink for MaskSink<'_> {
+    #[inline(always)]
+    fn triangle(&mut self, a: Vec3, b: Vec3, c: Vec3, _: [u32; 3], _: Tag) {
+        self.batch.push(self.table, a, b, c, &mut self.mask);
+        self.triangles += 1;
+    }
+
+    fn done(&self) -> bool {
+        self.mask == self.full
+    }
+}

@@ -1,0 +1,178 @@
+"""Scene visibility: many meshes and their instances shadow each other and any receiver point.
+
+Receivers are arbitrary points with a normal (lightmap texels, probes, panorama pixels), not
+mesh vertices; see `Scene`.
+"""
+
+import numpy as np
+
+from . import _checks, _native
+
+
+def _matrix(matrix, name="matrix"):
+    """A finite 4x4 affine world matrix (row-major, column vectors) as float64."""
+    array = np.asarray(matrix)
+    if array.dtype.kind not in "fiu" or array.dtype == np.bool_:
+        raise ValueError(f"{name} must hold real numbers, got dtype {array.dtype}")
+    if array.shape != (4, 4):
+        raise ValueError(f"{name} must be a 4x4 matrix, got shape {array.shape}")
+    array = np.ascontiguousarray(array, dtype=np.float64)
+    if not np.isfinite(array).all():
+        raise ValueError(f"{name} has a NaN or infinite value")
+    if not np.allclose(array[3], [0.0, 0.0, 0.0, 1.0]):
+        raise ValueError(f"{name} must be affine: its last row must be (0, 0, 0, 1), got {array[3].tolist()}")
+    if abs(np.linalg.det(array[:3, :3])) <= 1e-12 * max(np.abs(array[:3, :3]).max(), 1e-300) ** 3:
+        raise ValueError(f"{name} is singular: its 3x3 part has a zero determinant")
+    return array
+
+
+def _normals(values, count):
+    normals = _checks.float_array(values, "normals", (count, 3))
+    lengths = np.linalg.norm(normals, axis=1)
+    if count and (lengths == 0).any():
+        raise ValueError(f"normal {int(np.argmin(lengths))} is zero")
+    return normals
+
+
+class Scene:
+    """Visibility of a whole scene from arbitrary receivers (issue 10).
+
+    Meshes are added once (`add_mesh`) and placed by instances (`add_instance`) with a 4x4
+    world matrix: row-major, column vectors, p_world = M @ [p, 1]; a negative determinant
+    mirrors the mesh and turns its facing over. Instances share their mesh's geometry and
+    hierarchy; a mesh with no instance blocks nothing. Meshes that move per frame take new
+    positions with `set_vertices` (their hierarchy is refitted, not rebuilt, and the rest of
+    the scene is untouched); moved instances take `set_matrix`.
+
+    Each mesh gets a cluster hierarchy: clusters of nearby triangles with bounds and a
+    simplified proxy per node; a receiver culls what lies below its horizon, draws what
+    subtends less than `lod` (radius / distance) through its proxy and the rest at full
+    resolution (docs/scene_hierarchy.md). lod=0 draws every triangle.
+
+    Receivers: points (P, 3) with normals (P, 3) (normalised here), lifted along the normal by
+    `offset` x the scene's size (its bounding-box diagonal; default 1e-4), never an absolute
+    distance; no triangle is left out, so the offset is what keeps the surface a receiver
+    lies on below its horizon.
+    """
+
+    def __init__(self, *, lod=None):
+        self._native = _native.Scene()
+        self._meshes = []  # vertex count per mesh
+        if lod is not None:
+            self.lod = lod
+
+    @property
+    def lod(self):
+        """Radius / distance below which a cluster (or group) is drawn through its proxy."""
+        return self._native.lod
+
+    @lod.setter
+    def lod(self, value):
+        if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)) \
+                or not np.isfinite(value) or not 0 <= value <= 1:
+            raise ValueError(f"lod must be a number from 0 to 1, got {value!r}")
+        self._native.set_lod(float(value))
+
+    @property
+    def size(self):
+        """The diagonal of the scene's world bounding box."""
+        return self._native.size
+
+    @property
+    def triangle_count(self):
+        """Triangles in the scene, each instance counted."""
+        return self._native.triangle_count
+
+    @property
+    def blockers_per_receiver(self):
+        """Triangles rasterized per receiver in the last `transfer` (after culling and proxies)."""
+        return self._native.blockers_per_receiver
+
+    def add_mesh(self, vertices, triangles):
+        """Adds a mesh (V, 3) / (M, 3) and returns its id; place it with `add_instance`."""
+        verts, tris = _checks.mesh(vertices, triangles)
+        mesh_id = self._native.add_mesh(verts, tris)
+        self._meshes.append(len(verts))
+        return mesh_id
+
+    def add_instance(self, mesh_id, matrix=None):
+        """Places mesh `mesh_id` with a 4x4 world matrix (identity when None); returns the
+        instance's id."""
+        mesh_id = self._mesh_id(mesh_id)
+        return self._native.add_instance(mesh_id, _matrix(np.eye(4) if matrix is None else matrix))
+
+    def set_vertices(self, mesh_id, vertices):
+        """New positions (V, 3) for a mesh that moves; same vertex count and triangles."""
+        mesh_id = self._mesh_id(mesh_id)
+        self._native.set_vertices(mesh_id, _checks.float_array(vertices, "vertices", (self._meshes[mesh_id], 3)))
+
+    def set_matrix(self, instance_id, matrix):
+        """A new world matrix for an instance."""
+        count = self._native.instance_count
+        if isinstance(instance_id, bool) or not isinstance(instance_id, (int, np.integer)) or not 0 <= instance_id < count:
+            raise ValueError(f"instance id must be an integer in 0..{count - 1}, got {instance_id!r}")
+        self._native.set_matrix(int(instance_id), _matrix(matrix))
+
+    def set_radiance(self, mesh_id, rgb):
+        """Outgoing radiance per vertex (V, 3) of a mesh, seen by `gather` (black until set).
+        Every instance of the mesh shows the same radiance."""
+        mesh_id = self._mesh_id(mesh_id)
+        self._native.set_radiance(mesh_id, _checks.float_array(rgb, "rgb", (self._meshes[mesh_id], 3)))
+
+    def prepare(self):
+        """Builds the hierarchy now (otherwise the first query does)."""
+        self._native.prepare()
+
+    def transfer(self, points, normals, *, bands=5, brdf="diffuse", exponent=None, view=None, offset=None,
+                 downsample=None, table_resolution=_native.DEFAULT_TABLE_RESOLUTION, progress=None):
+        """Transfer vectors float32 (P, bands*bands) of receivers, with the definition and SH
+        convention of `hemishadow.transfer` (diffuse: T_i = integral of Y_i V max(0, n.s)).
+
+        view: for brdf="phong", the direction towards the viewer, (3,) or (P, 3).
+        offset: fraction of the scene's size (default 1e-4). progress: as in `hemishadow.transfer`.
+        """
+        pts, norms = self._receivers(points, normals)
+        exponent = _checks.brdf_exponent(brdf, exponent)
+        view_one, view_each = _checks.view_arrays(brdf, view, len(pts))
+        return self._native.transfer(pts, norms, _checks.band_count(bands), exponent, view_one, view_each,
+                                     _checks.offset(offset), int(table_resolution),
+                                     None if downsample is None else int(downsample), _checks.progress(progress))
+
+    def ambient_occlusion(self, points, normals, *, offset=None):
+        """Ambient occlusion (P,) float32: T_0 / 0.886227, 1 when nothing is in the way."""
+        t = self.transfer(points, normals, bands=1, offset=offset)
+        return (t[:, 0] / np.float32(np.pi * 0.28209479177387814)).astype(np.float32)
+
+    def valid(self, points, normals, *, offset=None):
+        """bool (P,): False for receivers inside solid geometry, whose nearest blockers show
+        their back faces over more than half of the hemisphere (a mirrored instance's faces
+        count with their facing turned over). Open concave corners stay valid."""
+        pts, norms = self._receivers(points, normals)
+        return self._native.valid(pts, norms, _checks.offset(offset))
+
+    def visibility(self, points, normals, *, offset=None):
+        """Raw visibility masks (P, 16) uint64: bit r*32+c of the 1024 (word = bit // 64) is set
+        when cell (r, c) of the 32x32 disk is blocked, in the tangent frame the engine builds
+        from each normal (as `hemishadow.visibility_mask`)."""
+        pts, norms = self._receivers(points, normals)
+        return self._native.visibility(pts, norms, _checks.offset(offset))
+
+    def gather(self, points, normals=None, *, bands=3, offset=None, progress=None):
+        """Ordered mode: SH projection float32 (P, bands*bands, 3) of the radiance arriving
+        from the nearest blocker in each direction (`set_radiance`, interpolated
+        barycentrically at the cell's direction), integral of L(s) Y_i(s) ds over the
+        receiver's hemisphere, or over the whole sphere when normals is None (probes).
+        Directions where nothing is seen add nothing."""
+        pts = _checks.points(points, "points")
+        norms = None if normals is None else _normals(normals, len(pts))
+        return self._native.gather(pts, norms, _checks.band_count(bands), _checks.offset(offset),
+                                   _checks.progress(progress))
+
+    def _receivers(self, points, normals):
+        pts = _checks.points(points, "points")
+        return pts, _normals(normals, len(pts))
+
+    def _mesh_id(self, mesh_id):
+        if isinstance(mesh_id, bool) or not isinstance(mesh_id, (int, np.integer)) or not 0 <= mesh_id < len(self._meshes):
+            raise ValueError(f"mesh id must be an integer in 0..{len(self._meshes) - 1}, got {mesh_id!r}")
+        return int(mesh_id)
