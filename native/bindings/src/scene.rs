@@ -12,7 +12,8 @@ use crate::{rows3, run, triangles3, vec3, PyProgress};
 
 #[pyclass(name = "Scene", module = "hemishadow._native")]
 pub struct PyScene {
-    inner: engine::scene::Scene,
+    /// Boxed for the same reason as the solver: Python objects are only 16-byte aligned.
+    inner: Box<engine::scene::Scene>,
 }
 
 fn matrix16(m: &PyReadonlyArray2<f64>) -> PyResult<[f64; 16]> {
@@ -27,7 +28,7 @@ fn matrix16(m: &PyReadonlyArray2<f64>) -> PyResult<[f64; 16]> {
 impl PyScene {
     #[new]
     fn new() -> Self {
-        PyScene { inner: engine::scene::Scene::new() }
+        PyScene { inner: Box::new(engine::scene::Scene::new()) }
     }
 
     fn add_mesh(&mut self, py: Python<'_>, vertices: PyReadonlyArray2<f32>, triangles: PyReadonlyArray2<u32>) -> PyResult<u32> {
