@@ -402,6 +402,9 @@ def build_markdown(results):
     out += speedup_table(results) + pvs_section(results) + vertex_section(results) + ["## Per mesh\n"]
     for name, m in results["meshes"].items():
         out += mesh_section(name, m)
+    out += ["## Scenes\n",
+            "Many objects and instances seen from arbitrary receivers (`hemishadow.Scene`, issue 10) are measured "
+            "by `bench/scene.py`: [benchmarks_scene.md](benchmarks_scene.md).\n"]
     return "\n".join(out)
 
 
