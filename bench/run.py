@@ -125,7 +125,7 @@ def timed_frames(order, solve, budget, one_if_slower):
     return times
 
 
-def build_variants(frames, tris, offset, log):
+def build_variants(frames, tris, normals, offset, log):
     """One warmed-up solver per variant that differs from the default -> (entries, rows of
     the variants not run: same as the default, no or failing build_pvs)."""
     defaults = solver_defaults()
@@ -145,7 +145,8 @@ def build_variants(frames, tris, offset, log):
         if pvs:
             start = time.perf_counter()
             try:
-                solver.build_pvs(np.ascontiguousarray(frames[PVS_POSES[label]], np.float32))
+                poses = PVS_POSES[label]
+                solver.build_pvs(np.ascontiguousarray(frames[poses], np.float32), np.asarray(normals)[poses])
             except Exception as error:  # an engine in the making: say so, keep the run
                 log(f"   {label:20s} not measured: build_pvs(poses (F, N, 3) float32) raised {error!r}")
                 skipped.append({"method": label, "kwargs": kwargs, "failed": repr(error)})
@@ -158,7 +159,7 @@ def build_variants(frames, tris, offset, log):
 def hemishadow_rows(frames, tris, normals, offset, order, errors_of, cfg, log):
     """Every variant timed side by side: frame after frame, each variant solves it in turn
     (the first one rotating), so a busy spell of the machine hits all variants alike."""
-    entries, skipped = build_variants(frames, tris, offset, log)
+    entries, skipped = build_variants(frames, tris, normals, offset, log)
     for e in entries:
         e["solver"].solve(frames[order[0]], normals[order[0]])  # warm-up
     spent = 0.0

@@ -133,6 +133,21 @@ def test_pvs_input_is_checked():
     assert solver.pvs["poses"] == 1 and solver.pvs["clusters_per_vertex"] > 0
     solver.clear_pvs()
     assert solver.pvs is None
+    with pytest.raises(ValueError, match="normals"):
+        solver.build_pvs(v[None], v[None, :5])
+
+
+def test_pvs_with_given_normals_matches_solves_given_them():
+    """Sets sampled with the normals `solve` is given reproduce its result bit for bit (the
+    mesh's own normals would pick different clusters)."""
+    v, t = as_engine(MESHES["torus_knot"])
+    rng = np.random.default_rng(3)
+    normals = (v / np.linalg.norm(v, axis=1, keepdims=True) + 0.3 * rng.normal(size=v.shape)).astype(np.float32)
+    full = hemishadow.TransferSolver(v, t, bands=BANDS, reuse=False)
+    pvs = hemishadow.TransferSolver(v, t, bands=BANDS, reuse=False)
+    pvs.build_pvs(v[None], normals[None])
+    np.testing.assert_array_equal(pvs.solve(v, normals), full.solve(v, normals))
+    assert pvs.stats["pvs"] and pvs.stats["blockers_per_vertex"] < full.stats["blockers_per_vertex"]
 
 
 @pytest.mark.parametrize("name", ["spot", "teapot", "rolled_sheet", "cesium_man"])

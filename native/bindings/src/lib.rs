@@ -86,6 +86,15 @@ fn rows3(array: &PyReadonlyArray2<f32>, what: &str) -> PyResult<Vec<[f32; 3]>> {
     Ok(view.rows().into_iter().map(|r| [r[0], r[1], r[2]]).collect())
 }
 
+/// (F, N, 3) -> F lists of points.
+fn frames3(array: &PyReadonlyArray3<f32>, what: &str) -> PyResult<Vec<Vec<[f32; 3]>>> {
+    let view = array.as_array();
+    if view.shape()[2] != 3 {
+        return Err(PyValueError::new_err(format!("{what} must have shape (F, N, 3), got {:?}", view.shape())));
+    }
+    Ok(view.outer_iter().map(|frame| frame.rows().into_iter().map(|r| [r[0], r[1], r[2]]).collect()).collect())
+}
+
 fn triangles3(array: &PyReadonlyArray2<u32>) -> PyResult<Vec<[u32; 3]>> {
     let view = array.as_array();
     if view.ncols() != 3 {
@@ -238,17 +247,23 @@ impl PySolver {
     }
 
     /// Samples poses (F, N, 3) for potentially visible sets.
-    fn build_pvs(&mut self, py: Python<'_>, poses: PyReadonlyArray3<f32>, tolerance: f32, progress: Option<Py<PyAny>>) -> PyResult<()> {
-        let view = poses.as_array();
-        if view.shape()[2] != 3 {
-            return Err(PyValueError::new_err(format!("poses must have shape (F, N, 3), got {:?}", view.shape())));
-        }
-        let poses: Vec<Vec<[f32; 3]>> = view.outer_iter().map(|pose| pose.rows().into_iter().map(|r| [r[0], r[1], r[2]]).collect()).collect();
+    #[pyo3(signature = (poses, normals, tolerance, progress))]
+    fn build_pvs(
+        &mut self,
+        py: Python<'_>,
+        poses: PyReadonlyArray3<f32>,
+        normals: Option<PyReadonlyArray3<f32>>,
+        tolerance: f32,
+        progress: Option<Py<PyAny>>,
+    ) -> PyResult<()> {
+        let poses = frames3(&poses, "poses")?;
+        let normals = normals.map(|n| frames3(&n, "normals")).transpose()?;
         let slices: Vec<&[[f32; 3]]> = poses.iter().map(Vec::as_slice).collect();
+        let normal_slices: Option<Vec<&[[f32; 3]]>> = normals.as_ref().map(|n| n.iter().map(Vec::as_slice).collect());
         let inner = &mut self.inner;
         let mut reporter = PyProgress::new(progress);
         let report = &mut reporter;
-        let result = run(py, || inner.build_pvs(&slices, tolerance, &mut |f| report.report(f)));
+        let result = run(py, || inner.build_pvs(&slices, normal_slices.as_deref(), tolerance, &mut |f| report.report(f)));
         reporter.finish(result)
     }
 

@@ -258,7 +258,11 @@ impl Solver {
     /// Samples `poses` (input vertices per pose) for potentially visible sets (`pvs.rs`):
     /// later frames within `tolerance` of one of them rasterize only the clusters that
     /// contributed to a receiver in some sampled pose. Replaces any earlier sets.
-    pub fn build_pvs(&mut self, poses: &[&[Vec3]], tolerance: f32, progress: Progress) -> Result<()> {
+    /// `normals`: per pose, as `solve` takes them (None: the mesh's own).
+    pub fn build_pvs(&mut self, poses: &[&[Vec3]], normals: Option<&[&[Vec3]]>, tolerance: f32, progress: Progress) -> Result<()> {
+        if normals.is_some_and(|n| n.len() != poses.len()) {
+            return Err(Error::invalid("build_pvs needs one set of normals per pose"));
+        }
         if poses.is_empty() {
             return Err(Error::invalid("build_pvs needs at least one pose"));
         }
@@ -267,7 +271,7 @@ impl Solver {
         }
         let (mut per_pose, mut welded_poses) = (Vec::new(), Vec::new());
         for (p, pose) in poses.iter().enumerate() {
-            let frame = self.prepare(pose, None, None)?;
+            let frame = self.prepare(pose, normals.map(|n| n[p]), None)?;
             let mut needed: Vec<Vec<u32>> = vec![Vec::new(); frame.positions.len()];
             let mut fraction = |f: f32| progress((p as f32 + f) / poses.len() as f32);
             let mut rows = vec![0.0f32; frame.positions.len()];

@@ -73,7 +73,7 @@ class TransferSolver:
         blockers, computed, reused, used_pvs = self._solver.stats()
         return {"blockers_per_vertex": blockers, "computed": computed, "reused": reused, "pvs": used_pvs}
 
-    def build_pvs(self, poses, *, tolerance=DEFAULT_PVS_TOLERANCE, progress=None):
+    def build_pvs(self, poses, normals=None, *, tolerance=DEFAULT_PVS_TOLERANCE, progress=None):
         """Potentially visible sets (the paper's section 3.2), opt-in: it needs poses of the
         animation. poses: (F, N, 3) vertex positions of a few sampled frames (the bake range,
         or poses you pick). For each receiver the solver keeps the clusters that contribute to
@@ -81,7 +81,9 @@ class TransferSolver:
         have not covered); later solves rasterize only those while the frame's pose stays
         within `tolerance` of a sampled one: the largest vertex displacement, as a fraction of
         the rest pose's half size (its largest half-extent). Farther poses fall back to the
-        full hierarchy (`stats['pvs']` says which was used). Replaces earlier sets."""
+        full hierarchy (`stats['pvs']` says which was used). normals: (F, N, 3), the normals
+        `solve` will be given for those poses (None: the mesh's own, as `solve` without
+        normals). Replaces earlier sets."""
         poses = np.ascontiguousarray(poses, dtype=np.float32)
         if poses.ndim != 3 or poses.shape[1:] != (self.vertex_count, 3):
             raise ValueError(f"poses must have shape (F, {self.vertex_count}, 3), got {poses.shape}")
@@ -91,7 +93,11 @@ class TransferSolver:
             raise ValueError("poses must be finite")
         if not (np.isfinite(tolerance) and tolerance >= 0):
             raise ValueError(f"tolerance must be a finite, non-negative number, got {tolerance!r}")
-        self._solver.build_pvs(poses, float(tolerance), _checks.progress(progress))
+        if normals is not None:
+            normals = np.ascontiguousarray(normals, dtype=np.float32)
+            if normals.shape != poses.shape:
+                raise ValueError(f"normals must have the shape of poses {poses.shape}, got {normals.shape}")
+        self._solver.build_pvs(poses, normals, float(tolerance), _checks.progress(progress))
 
     def clear_pvs(self):
         """Drops the potentially visible sets: every solve uses the full hierarchy again."""
