@@ -18,8 +18,8 @@ use rayon::prelude::*;
 use crate::disk_mask::{cell_direction, Mask, MASK_SIDE};
 use crate::error::{Error, Result};
 
-/// The paper's 6 x 128 x 128 texels (12 MiB). 64 (3 MiB, stays in cache) measured 1.1-1.4x
-/// faster for about +0.1 percentage point of median error (docs/benchmarks.md), but its
+/// The paper's 6 x 128 x 128 texels (12 MiB). 64 (3 MiB, stays in cache) measured 1.06-1.7x
+/// faster for +0.03 to +0.33 percentage points of median error (docs/benchmarks.md), but its
 /// coarser planes double the worst per-vertex change under rounding (AO 0.011 where the
 /// scale-invariance bound of tests/test_solver_trust.py is 0.005): an option, not the default.
 pub const DEFAULT_RESOLUTION: usize = 128;
