@@ -21,21 +21,14 @@ sys.path.insert(0, ROOT)
 import addon  # noqa: E402
 from addon import engine_bridge, mesh_io  # noqa: E402
 from spies import count_solves  # noqa: E402
+import layers  # noqa: E402
+from layers import attribute  # noqa: E402
 
 
 # -- helpers -------------------------------------------------------------------------------
 
-def attribute(obj, name):
-    attr = obj.data.attributes[name]
-    width = 4 if attr.data_type == "FLOAT_COLOR" else 1
-    out = np.empty(len(attr.data) * width, np.float32)
-    attr.data.foreach_get("color" if width == 4 else "value", out)
-    return out.reshape(-1, width)[:, :3] if width == 4 else out
-
-
 def sh_layers(obj):
-    names = sorted(a.name for a in obj.data.attributes if a.name.startswith(mesh_io.SH_PREFIX))
-    return np.stack([attribute(obj, n) for n in names], axis=1)
+    return layers.sh_layers(obj, mesh_io.SH_PREFIX)
 
 
 def outputs(obj):
