@@ -11,30 +11,22 @@
 
 use crate::mesh::Vec3;
 
-/// A list of triangles over a compact vertex list, so that a receiver transforms each vertex
-/// into its tangent frame once rather than once per triangle corner.
+/// A list of triangles and the distinct vertices they use (for bounds and for finding what
+/// moved); the solver rasterizes them from packets (`packets.rs`).
 #[derive(Default)]
 pub struct Compact {
     /// Welded vertex ids, each once.
     pub vertices: Vec<u32>,
-    /// Triangles as indices into `vertices`.
-    pub triangles: Vec<[u32; 3]>,
-    /// The same triangles over welded ids (to recognise the receiver's own triangles).
+    /// The triangles over welded ids.
     pub welded: Vec<[u32; 3]>,
 }
 
 impl Compact {
     fn new(triangles: impl Iterator<Item = [u32; 3]>) -> Self {
         let mut compact = Compact::default();
-        let mut slot: std::collections::HashMap<u32, u32> = std::collections::HashMap::new();
+        let mut seen = std::collections::HashSet::new();
         for tri in triangles {
-            let local = tri.map(|v| {
-                *slot.entry(v).or_insert_with(|| {
-                    compact.vertices.push(v);
-                    (compact.vertices.len() - 1) as u32
-                })
-            });
-            compact.triangles.push(local);
+            compact.vertices.extend(tri.iter().filter(|&&v| seen.insert(v)));
             compact.welded.push(tri);
         }
         compact

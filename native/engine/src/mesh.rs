@@ -132,6 +132,21 @@ impl WeldedMesh {
     }
 }
 
+/// The box that holds nothing: any point widens it.
+pub const EMPTY_BOX: [Vec3; 2] = [[f32::INFINITY; 3], [f32::NEG_INFINITY; 3]];
+
+/// The axis-aligned box around `points` ([min, max]; `EMPTY_BOX` for none).
+pub fn box_of(points: impl Iterator<Item = Vec3>) -> [Vec3; 2] {
+    let mut b = EMPTY_BOX;
+    for p in points {
+        for a in 0..3 {
+            b[0][a] = b[0][a].min(p[a]);
+            b[1][a] = b[1][a].max(p[a]);
+        }
+    }
+    b
+}
+
 #[inline]
 pub fn normalize(v: Vec3) -> Option<Vec3> {
     let len = dot(v, v).sqrt();

@@ -27,12 +27,13 @@ impl Pvs {
         let mut start = Vec::with_capacity(vertices + 1);
         let mut clusters = Vec::new();
         start.push(0);
+        let mut merged = Vec::new();
         for v in 0..vertices {
-            let first = clusters.len();
-            per_pose.iter().for_each(|pose| clusters.extend_from_slice(&pose[v]));
-            clusters[first..].sort_unstable();
-            let unique = dedup_tail(&mut clusters, first);
-            clusters.truncate(first + unique);
+            merged.clear();
+            per_pose.iter().for_each(|pose| merged.extend_from_slice(&pose[v]));
+            merged.sort_unstable();
+            merged.dedup();
+            clusters.extend_from_slice(&merged);
             start.push(clusters.len() as u32);
         }
         Pvs { start, clusters, poses, tolerance }
@@ -63,19 +64,6 @@ impl Pvs {
     pub fn bytes(&self) -> usize {
         (self.start.len() + self.clusters.len()) * 4 + self.poses.iter().map(|p| p.len() * 12).sum::<usize>()
     }
-}
-
-/// Dedups the sorted `values[first..]` in place; returns how many distinct values remain.
-fn dedup_tail(values: &mut [u32], first: usize) -> usize {
-    let tail = &mut values[first..];
-    let mut kept = 0;
-    for i in 0..tail.len() {
-        if kept == 0 || tail[i] != tail[kept - 1] {
-            tail[kept] = tail[i];
-            kept += 1;
-        }
-    }
-    kept
 }
 
 /// The mask grown by one cell in the 8 directions.

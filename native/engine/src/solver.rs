@@ -15,7 +15,7 @@ use crate::disk_mask::{disk, Mask};
 use crate::error::{Error, Result};
 use crate::hierarchy::{default_coarse_triangles, Hierarchy, GROUP};
 use crate::integrate::{Brdf, Quadrature};
-use crate::mesh::{check_finite, weld, welded_normals, Normalization, Vec3};
+use crate::mesh::{box_of, check_finite, weld, welded_normals, Normalization, Vec3};
 use crate::progress::{par_rows, Progress};
 use crate::pvs::{contributing, Pvs};
 use crate::plane_table::PlaneTable;
@@ -166,7 +166,7 @@ impl Solver {
     pub fn memory_bytes(&self) -> usize {
         use std::mem::size_of;
         let h = &self.hierarchy;
-        let compact = |c: &crate::hierarchy::Compact| c.vertices.len() * 4 + c.triangles.len() * 24;
+        let compact = |c: &crate::hierarchy::Compact| c.vertices.len() * 4 + c.welded.len() * 12;
         let last = self.last.as_ref().map_or(0, |l| {
             (l.positions.len() + l.normals.len() + l.views.as_ref().map_or(0, Vec::len)) * size_of::<Vec3>()
                 + l.group_bounds.len() * 24
@@ -352,7 +352,7 @@ impl Solver {
         (0..self.hierarchy.clusters())
             .map(|c| {
                 let fine = self.hierarchy.cluster_compact[c].vertices.iter().map(|&v| positions[v as usize]);
-                bounds_of(fine.chain(self.hierarchy.coarse[c].iter().map(|&v| positions[v as usize])))
+                box_of(fine.chain(self.hierarchy.coarse[c].iter().map(|&v| positions[v as usize])))
             })
             .collect()
     }
@@ -376,7 +376,7 @@ impl Solver {
                 let range = g * GROUP..((g + 1) * GROUP).min(clusters.len());
                 let corners = clusters[range].iter().flat_map(|b| [b[0], b[1]]);
                 let coarse = self.hierarchy.group_compact[g].vertices.iter().map(|&v| positions[v as usize]);
-                bounds_of(corners.filter(|p| p[0].is_finite()).chain(coarse))
+                box_of(corners.filter(|p| p[0].is_finite()).chain(coarse))
             })
             .collect()
     }
@@ -524,13 +524,3 @@ fn close_clusters(receiver: &Receiver, spheres: &[[f32; 4]]) -> u32 {
     })
 }
 
-fn bounds_of(points: impl Iterator<Item = Vec3>) -> [Vec3; 2] {
-    let mut b = [[f32::INFINITY; 3], [f32::NEG_INFINITY; 3]];
-    for p in points {
-        for a in 0..3 {
-            b[0][a] = b[0][a].min(p[a]);
-            b[1][a] = b[1][a].max(p[a]);
-        }
-    }
-    b
-}

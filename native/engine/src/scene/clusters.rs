@@ -142,18 +142,7 @@ impl MeshTree {
     }
 }
 
-pub const EMPTY_BOX: [Vec3; 2] = [[f32::INFINITY; 3], [f32::NEG_INFINITY; 3]];
-
-pub fn box_of(points: impl Iterator<Item = Vec3>) -> [Vec3; 2] {
-    let mut b = EMPTY_BOX;
-    for p in points {
-        for a in 0..3 {
-            b[0][a] = b[0][a].min(p[a]);
-            b[1][a] = b[1][a].max(p[a]);
-        }
-    }
-    b
-}
+pub use crate::mesh::{box_of, EMPTY_BOX};
 
 pub fn union(a: &[Vec3; 2], b: &[Vec3; 2]) -> [Vec3; 2] {
     [[0, 1, 2].map(|i| a[0][i].min(b[0][i])), [0, 1, 2].map(|i| a[1][i].max(b[1][i]))]
