@@ -11,6 +11,7 @@
 //! instances builds what is new (and rebuilds the top tree, which is cheap).
 
 pub mod affine;
+pub mod casters;
 pub mod clusters;
 pub mod gather;
 pub mod ordered;
@@ -19,6 +20,13 @@ pub mod top;
 pub mod traverse;
 
 use std::sync::atomic::{AtomicU64, Ordering};
+
+/// Source of `Scene::version` values, unique across every scene of the process.
+static VERSIONS: AtomicU64 = AtomicU64::new(1);
+
+fn next_version() -> u64 {
+    VERSIONS.fetch_add(1, Ordering::Relaxed)
+}
 use std::sync::Arc;
 
 use rayon::prelude::*;
@@ -70,6 +78,8 @@ pub struct Scene {
     lod: f32,
     table_resolution: usize,
     stats: SceneStats,
+    /// Changes with every edit of the geometry, placements or level of detail.
+    version: u64,
 }
 
 impl Default for Scene {
@@ -89,6 +99,7 @@ impl Scene {
             lod: DEFAULT_LOD,
             table_resolution: crate::plane_table::DEFAULT_RESOLUTION,
             stats: SceneStats::default(),
+            version: next_version(),
         }
     }
 
@@ -101,6 +112,7 @@ impl Scene {
         if let Some(t) = triangles.iter().find(|t| t.iter().any(|&v| v as usize >= vertices.len())) {
             return Err(Error::invalid(format!("triangle {t:?} uses a vertex beyond the mesh's {} vertices", vertices.len())));
         }
+        self.version = next_version();
         self.meshes.push(SceneMesh { positions: vertices.to_vec(), triangles: triangles.to_vec(), tree: None, moved: false, radiance: None });
         Ok((self.meshes.len() - 1) as u32)
     }
@@ -110,6 +122,7 @@ impl Scene {
     pub fn add_instance(&mut self, mesh: u32, matrix: &[f64; 16]) -> Result<u32> {
         self.mesh_index(mesh)?;
         self.instances.push((mesh, Affine::from_rows(matrix)?));
+        self.version = next_version();
         self.top = None;
         Ok((self.instances.len() - 1) as u32)
     }
@@ -126,6 +139,7 @@ impl Scene {
         self.meshes[m].positions.copy_from_slice(vertices);
         self.meshes[m].moved = true;
         self.refit_top = true;
+        self.version = next_version();
         Ok(())
     }
 
@@ -133,6 +147,7 @@ impl Scene {
         let i = self.instance_index(instance)?;
         self.instances[i].1 = Affine::from_rows(matrix)?;
         self.refit_top = true;
+        self.version = next_version();
         Ok(())
     }
 
@@ -156,7 +171,14 @@ impl Scene {
             return Err(Error::invalid(format!("lod must be between 0 and 1, got {lod}")));
         }
         self.lod = lod;
+        self.version = next_version();
         Ok(())
+    }
+
+    /// Changes whenever the blockers may have changed (see `casters`: a solver reuses nothing
+    /// across versions).
+    pub fn version(&self) -> u64 {
+        self.version
     }
 
     pub fn lod(&self) -> f32 {
@@ -223,6 +245,11 @@ impl Scene {
         }
     }
 
+    /// Whether every mesh has its tree and nothing moved since `prepare`.
+    pub fn prepared(&self) -> bool {
+        self.top.is_some() && !self.refit_top && self.meshes.iter().all(|m| m.tree.is_some() && !m.moved)
+    }
+
     /// The diagonal of the scene's world bounding box (0 when empty); from the geometry
     /// only, so that it does not depend on how the hierarchy was built.
     pub fn size(&mut self) -> f32 {
@@ -252,7 +279,7 @@ impl Scene {
         let quadrature = Quadrature::new(downsample, basis);
         let k = quadrature.basis().coeffs();
         let (trees, positions) = self.walk_parts();
-        let walk = Walk { trees: &trees, positions: &positions, instances: &self.instances, top: self.top.as_ref().expect("prepared"), lod: self.lod };
+        let walk = Walk { trees: &trees, positions: &positions, instances: &self.instances, top: self.top.as_ref().expect("prepared"), lod: self.lod, exclude: &[] };
         let full = disk();
         let counted = AtomicU64::new(0);
         let mut out = vec![0.0f32; points.len() * k];
@@ -276,7 +303,7 @@ impl Scene {
         let offset = receivers::offset(offset, self.size())?;
         let table = PlaneTable::shared(self.table_resolution)?;
         let (trees, positions) = self.walk_parts();
-        let walk = Walk { trees: &trees, positions: &positions, instances: &self.instances, top: self.top.as_ref().expect("prepared"), lod: self.lod };
+        let walk = Walk { trees: &trees, positions: &positions, instances: &self.instances, top: self.top.as_ref().expect("prepared"), lod: self.lod, exclude: &[] };
         let full = disk();
         Ok(points
             .par_iter()
@@ -296,7 +323,7 @@ impl Scene {
         let offset = receivers::offset(offset, self.size())?;
         let table = PlaneTable::shared(self.table_resolution)?;
         let (trees, positions) = self.walk_parts();
-        let walk = Walk { trees: &trees, positions: &positions, instances: &self.instances, top: self.top.as_ref().expect("prepared"), lod: self.lod };
+        let walk = Walk { trees: &trees, positions: &positions, instances: &self.instances, top: self.top.as_ref().expect("prepared"), lod: self.lod, exclude: &[] };
         let radiance: Vec<Option<&[Rgb]>> = vec![None; self.meshes.len()];
         Ok(points
             .par_iter()
@@ -319,7 +346,7 @@ impl Scene {
         let offset = receivers::offset(offset, self.size())?;
         let table = PlaneTable::shared(self.table_resolution)?;
         let (trees, positions) = self.walk_parts();
-        let walk = Walk { trees: &trees, positions: &positions, instances: &self.instances, top: self.top.as_ref().expect("prepared"), lod: self.lod };
+        let walk = Walk { trees: &trees, positions: &positions, instances: &self.instances, top: self.top.as_ref().expect("prepared"), lod: self.lod, exclude: &[] };
         let radiance: Vec<Option<&[Rgb]>> = self.meshes.iter().map(|m| m.radiance.as_deref()).collect();
         let k = projector.coeffs();
         let mut out = vec![0.0f32; points.len() * k * 3];

@@ -48,6 +48,8 @@ pub struct Walk<'a> {
     pub instances: &'a [(u32, Affine)],
     pub top: &'a TopTree,
     pub lod: f32,
+    /// Instances left out (ascending ids): a solver's own object, which it shadows itself.
+    pub exclude: &'a [u32],
 }
 
 /// A mesh-space to receiver-space map: rows of (frame x linear), and the translation.
@@ -102,6 +104,9 @@ impl Walk<'_> {
             let node = self.top.nodes[n as usize];
             if node.children[0] != NO_CHILD {
                 stack.extend_from_slice(&node.children);
+                continue;
+            }
+            if self.exclude.binary_search(&node.instance).is_ok() {
                 continue;
             }
             self.instance(receiver, node.instance as usize, scratch, sink);
@@ -174,7 +179,12 @@ pub struct MaskSink<'a> {
 
 impl<'a> MaskSink<'a> {
     pub fn new(table: &'a PlaneTable, full: Mask) -> Self {
-        MaskSink { table, batch: TriangleBatch::default(), mask: Mask::EMPTY, full, triangles: 0 }
+        MaskSink::onto(table, Mask::EMPTY, full)
+    }
+
+    /// A sink whose mask starts as `mask` (blockers rasterized already elsewhere).
+    pub fn onto(table: &'a PlaneTable, mask: Mask, full: Mask) -> Self {
+        MaskSink { table, batch: TriangleBatch::default(), mask, full, triangles: 0 }
     }
 
     pub fn finish(mut self) -> (Mask, u64) {
