@@ -61,6 +61,12 @@ impl PyScene {
         run(py, || inner.set_radiance(mesh, &c))
     }
 
+    fn set_instance_radiance(&mut self, py: Python<'_>, instance: u32, rgb: PyReadonlyArray2<f32>) -> PyResult<()> {
+        let c = rows3(&rgb, "rgb")?;
+        let inner = &mut self.inner;
+        run(py, || inner.set_instance_radiance(instance, &c))
+    }
+
     fn set_lod(&mut self, py: Python<'_>, lod: f32) -> PyResult<()> {
         let inner = &mut self.inner;
         run(py, || inner.set_lod(lod))

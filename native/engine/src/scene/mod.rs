@@ -72,6 +72,8 @@ pub struct SceneStats {
 pub struct Scene {
     meshes: Vec<SceneMesh>,
     instances: Vec<(u32, Affine)>,
+    /// Per instance, radiance that overrides its mesh's (`set_instance_radiance`).
+    instance_radiance: Vec<Option<Vec<Rgb>>>,
     instance_bounds: Vec<[Vec3; 2]>,
     top: Option<TopTree>,
     refit_top: bool,
@@ -93,6 +95,7 @@ impl Scene {
         Scene {
             meshes: Vec::new(),
             instances: Vec::new(),
+            instance_radiance: Vec::new(),
             instance_bounds: Vec::new(),
             top: None,
             refit_top: false,
@@ -122,6 +125,7 @@ impl Scene {
     pub fn add_instance(&mut self, mesh: u32, matrix: &[f64; 16]) -> Result<u32> {
         self.mesh_index(mesh)?;
         self.instances.push((mesh, Affine::from_rows(matrix)?));
+        self.instance_radiance.push(None);
         self.version = next_version();
         self.top = None;
         Ok((self.instances.len() - 1) as u32)
@@ -163,6 +167,30 @@ impl Scene {
         }
         self.meshes[m].radiance = Some(rgb.to_vec());
         Ok(())
+    }
+
+    /// Outgoing radiance per vertex of one instance's mesh, (V, 3), for `gather`: instances
+    /// of one mesh that are lit differently. Replaces the mesh's radiance for this instance.
+    pub fn set_instance_radiance(&mut self, instance: u32, rgb: &[Rgb]) -> Result<()> {
+        let i = self.instance_index(instance)?;
+        let count = self.meshes[self.instances[i].0 as usize].positions.len();
+        if rgb.len() != count {
+            return Err(Error::invalid(format!("instance {instance}'s mesh has {count} vertices, got {} radiance rows", rgb.len())));
+        }
+        if let Some(v) = rgb.iter().position(|c| !c.iter().all(|v| v.is_finite())) {
+            return Err(Error::invalid(format!("radiance {v} is not finite: {:?}", rgb[v])));
+        }
+        self.instance_radiance[i] = Some(rgb.to_vec());
+        Ok(())
+    }
+
+    /// Per instance, the radiance its blockers show: its own, else its mesh's, else none.
+    fn radiance_by_instance(&self) -> Vec<Option<&[Rgb]>> {
+        self.instances
+            .iter()
+            .zip(&self.instance_radiance)
+            .map(|((m, _), own)| own.as_deref().or(self.meshes[*m as usize].radiance.as_deref()))
+            .collect()
     }
 
     /// Level of detail (see DEFAULT_LOD); 0 draws every triangle at full resolution.
@@ -324,7 +352,7 @@ impl Scene {
         let table = PlaneTable::shared(self.table_resolution)?;
         let (trees, positions) = self.walk_parts();
         let walk = Walk { trees: &trees, positions: &positions, instances: &self.instances, top: self.top.as_ref().expect("prepared"), lod: self.lod, exclude: &[] };
-        let radiance: Vec<Option<&[Rgb]>> = vec![None; self.meshes.len()];
+        let radiance: Vec<Option<&[Rgb]>> = vec![None; self.instances.len()];
         Ok(points
             .par_iter()
             .zip(normals)
@@ -347,7 +375,7 @@ impl Scene {
         let table = PlaneTable::shared(self.table_resolution)?;
         let (trees, positions) = self.walk_parts();
         let walk = Walk { trees: &trees, positions: &positions, instances: &self.instances, top: self.top.as_ref().expect("prepared"), lod: self.lod, exclude: &[] };
-        let radiance: Vec<Option<&[Rgb]>> = self.meshes.iter().map(|m| m.radiance.as_deref()).collect();
+        let radiance = self.radiance_by_instance();
         let k = projector.coeffs();
         let mut out = vec![0.0f32; points.len() * k * 3];
         par_rows(&mut out, k * 3, progress, Vec::new, |r, scratch, row| {

@@ -27,6 +27,7 @@ pub const ERROR_SHARE: f32 = 0.1;
 #[derive(Clone, Copy, Debug)]
 pub struct Tag {
     pub mesh: u32,
+    pub instance: u32,
     /// -1 for an instance with a negative determinant: its winding is turned over.
     pub facing: f32,
 }
@@ -120,7 +121,7 @@ impl Walk<'_> {
         let (mesh, transform) = self.instances[i];
         let (tree, positions) = (self.trees[mesh as usize], self.positions[mesh as usize]);
         let local = Local::new(receiver, &transform);
-        let tag = Tag { mesh, facing: transform.facing };
+        let tag = Tag { mesh, instance: i as u32, facing: transform.facing };
         let lod2 = self.lod * self.lod;
         let error2 = (self.lod * ERROR_SHARE).powi(2);
         let stretch2 = transform.stretch * transform.stretch;
