@@ -105,8 +105,14 @@ class SceneCalls:
 
 # -- shadowing -----------------------------------------------------------------------------
 
-def test_a_cube_darkens_the_plane_under_it_as_the_scene_does(scene):
-    plane, box = ground(scene), cube(scene)
+@pytest.mark.parametrize("rotation, scale", [((0, 0, 0), (1, 1, 1)), ((0, 0, 0.5), (1, 1, 1)),
+                                             ((0.2, 0, 2.0), (-1, 1, 1))], ids=["world", "turned", "mirrored"])
+def test_a_cube_darkens_the_plane_under_it_as_the_scene_does(scene, rotation, scale):
+    """The receiver's frame (turned, mirrored, moved) is placed among the casters exactly."""
+    plane, box = ground(scene), cube(scene, location=(0.3, 0.2, 0.6))
+    plane.rotation_euler, plane.scale, plane.location = rotation, scale, (0.3, 0.2, 0.0)
+    box.rotation_euler = rotation
+    bpy.context.view_layer.update()
     alone = live_ao(scene, plane)
     assert np.abs(alone - 1.0).max() < 1e-4, "a flat plane has no self-shadowing"
     casters_collection(scene, [plane, box])
@@ -119,10 +125,12 @@ def test_a_cube_darkens_the_plane_under_it_as_the_scene_does(scene):
         obj.data.vertices.foreach_get("co", co)
         reference.add_instance(reference.add_mesh(co.reshape(-1, 3), mesh_io.triangles_of(obj.data)),
                                np.array(obj.matrix_world))
-    expected = reference.ambient_occlusion(points, np.tile([0.0, 0.0, 1.0], (len(points), 1)))
-    below = under(points)
+    up = np.asarray(plane.matrix_world.to_3x3() @ __import__("mathutils").Vector((0, 0, 1)))
+    expected = reference.ambient_occlusion(points, np.tile(up, (len(points), 1)))
+    below = np.linalg.norm(points[:, :2] - (0.3, 0.2), axis=1) < 0.25
     assert (alone[below] - shadowed[below]).min() > 0.2, "every vertex under the cube is darkened"
-    assert np.abs(shadowed - expected).max() < 0.02
+    # Both rasterize 32x32 hemispheres, each in its own tangent frame: 0.015 apart at most.
+    assert np.abs(shadowed - expected).max() < 0.02 and np.abs(shadowed - expected).mean() < 0.005
     assert "shadowed by 'Shadow casters'" in plane.hemishadow.status
 
 
@@ -164,8 +172,8 @@ def test_a_keyframed_caster_moves_the_shadow_and_a_static_one_costs_nothing(scen
     last = attribute(plane, mesh_io.AO)
     points = world_vertices(plane)
     left, right = under(points, (-1.0, 0.0)), under(points, (1.0, 0.0))
-    assert (first[left] < 0.7).all() and (last[left] > 0.9).all()
-    assert (last[right] < 0.7).all() and (first[right] > 0.9).all()
+    assert first[left].max() < 0.8 and last[left].min() > 0.9
+    assert last[right].max() < 0.8 and first[right].min() > 0.9
     assert calls.of("set_matrix") == 1 and calls.of("add_mesh") == 0, "moved, not rebuilt"
 
     box.animation_data_clear()   # now everything is static
@@ -183,7 +191,7 @@ def test_a_deforming_caster_is_refitted_not_rebuilt(scene, monkeypatch):
     box.shape_key_add(name="Basis")
     tall = box.shape_key_add(name="Tall")
     for point in tall.data:
-        point.co.z *= 3.0
+        point.co.z += 1.0 if point.co.z > 0 else 0.0   # the top goes up
     tall.value = 0.0
     tall.keyframe_insert("value", frame=1)
     tall.value = 1.0
@@ -194,8 +202,9 @@ def test_a_deforming_caster_is_refitted_not_rebuilt(scene, monkeypatch):
     calls = SceneCalls(monkeypatch)
     scene.frame_set(5)
     assert calls.of("set_vertices") == 1 and calls.of("add_mesh") == 0 and calls.of("set_matrix") == 0
-    below = under(world_vertices(plane))
-    assert (attribute(plane, mesh_io.AO)[below] < before[below] - 0.02).all(), "a taller box shadows more"
+    beside = under(world_vertices(plane), half=1.0) & ~under(world_vertices(plane), half=0.5)
+    after = attribute(plane, mesh_io.AO)
+    assert (after[beside] < before[beside] - 0.01).all(), "a taller box shadows more around it"
 
 
 def test_moving_a_caster_by_hand_recomputes_the_receiver(scene):
@@ -207,6 +216,22 @@ def test_moving_a_caster_by_hand_recomputes_the_receiver(scene):
     bpy.context.view_layer.update()
     below = under(world_vertices(plane))
     assert (attribute(plane, mesh_io.AO)[below] > before[below] + 0.2).all()
+
+
+def test_a_scene_held_by_a_solve_is_not_changed_meanwhile(scene):
+    """A worker may still solve with last frame's casters: the next frame updates another scene."""
+    plane, box = ground(scene), cube(scene)
+    casters_collection(scene, [plane, box])
+    held = casters.for_object(plane, scene, bpy.context.evaluated_depsgraph_get())
+    version = held.caster_scene.version
+    box.location.x = 1.0
+    moved = casters.for_object(plane, scene, bpy.context.evaluated_depsgraph_get())
+    assert moved.caster_scene is not held.caster_scene and held.caster_scene.version == version
+    held.release()
+    moved.release()
+    box.location.x = -1.0
+    again = casters.for_object(plane, scene, bpy.context.evaluated_depsgraph_get())
+    assert again.caster_scene is held.caster_scene and again.version > version, "free again: updated in place"
 
 
 # -- instancing ----------------------------------------------------------------------------
@@ -264,7 +289,7 @@ def test_casters_that_cannot_cast_are_named_not_raised(scene):
     assert "'BézierCurve' skipped: a curve object" in status, status
     assert "'Loose points' skipped: its mesh has no faces" in status, status
     assert "'Flattened' skipped" in status, status
-    assert attribute(plane, mesh_io.AO)[under(world_vertices(plane))].max() < 0.7, "the cube still casts"
+    assert attribute(plane, mesh_io.AO)[under(world_vertices(plane))].max() < 0.8, "the cube still casts"
 
 
 # -- the bake ------------------------------------------------------------------------------
