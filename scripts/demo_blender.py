@@ -66,6 +66,9 @@ def parse_args(argv=None):
     parser.add_argument("--hdri", default="forest", help="one of Blender's built-in HDRIs (default forest)")
     parser.add_argument("--no-casters", action="store_true",
                         help="self-shadowing only: no 'Shadow casters' collection (to compare the per-frame times)")
+    parser.add_argument("--source", action="store_true",
+                        help="register the add-on of this checkout with the environment's engine instead of "
+                             "installing the zip (to measure changes before they are packaged)")
     return parser.parse_args(argv)
 
 
@@ -297,9 +300,18 @@ def main(argv=None):
 
     import bpy
 
-    addon = install_extension(args.zip, site)
-    engine_bridge = sys.modules[MODULE + ".engine_bridge"]
-    bake = sys.modules[MODULE + ".operators.bake"]
+    module = "addon" if args.source else MODULE
+    if args.source:
+        sys.path.insert(0, str(ROOT))
+        import addon
+        import hemishadow
+
+        addon.register()
+        print(f"add-on from {ROOT / 'addon'} (not installed), engine from {pathlib.Path(hemishadow.__file__).parent}")
+    else:
+        install_extension(args.zip, site)
+    engine_bridge = sys.modules[module + ".engine_bridge"]
+    bake = sys.modules[module + ".operators.bake"]
 
     scene, cloth, suzanne, floor = build_scene(args.grid, args.frames, args.hdri)
     blend = out / "demo.blend"
