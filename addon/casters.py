@@ -51,6 +51,7 @@ class _Item:
     mesh: object        # the evaluated bpy Mesh
     matrix: np.ndarray  # (4, 4) float64 world matrix
     owner: int | None   # session_uid of the object drawn directly (not through an instancer)
+    original: int | None  # vertex count of the source's own mesh (None: geometry made by nodes)
     name: tuple         # names: (instancer, object, persistent id), for the cache's records
 
 
@@ -91,8 +92,9 @@ def _items(collection, depsgraph, notes):
         persistent = tuple(instance.persistent_id) if instance.is_instance else ()
         key = (drawer.session_uid, source.session_uid, persistent)
         owner = None if instance.is_instance else source.session_uid
+        original = len(source.data.vertices) if mesh_key[0] != "geometry" and source.type == "MESH" else None
         items.append(_Item(key, mesh_key, evaluated.data, np.array(instance.matrix_world, np.float64), owner,
-                           (drawer.name, source.name, persistent)))
+                           original, (drawer.name, source.name, persistent)))
     return items
 
 
@@ -387,7 +389,9 @@ def fingerprint(obj, scene, depsgraph):
     """(10, 3) float64 record of where every caster is this frame, or None without casters:
     the count of drawn meshes, the largest coordinate, and eight random-sign sums over the
     drawn meshes (by names) of their world matrices and staleness-style sums of positions:
-    any caster moved by more than staleness.TOLERANCE of the largest coordinate changes a sum."""
+    any caster moved by more than staleness.TOLERANCE of the largest coordinate changes a sum.
+    Of a mesh object only its original vertices count (as for receivers, mesh_io): renders
+    subdivide more than the viewport the bake ran in, and keep those first, in place."""
     from . import staleness
 
     collection = collection_of(obj, scene)
@@ -396,7 +400,10 @@ def fingerprint(obj, scene, depsgraph):
     rows, sums = [], {}
     for item in sorted(_items(collection, depsgraph, []), key=lambda i: i.name):
         if item.mesh_key not in sums:
-            sums[item.mesh_key] = staleness.fingerprint(_positions(item.mesh))
+            positions = _positions(item.mesh)
+            if item.original is not None and item.original <= len(positions):
+                positions = positions[:item.original]
+            sums[item.mesh_key] = staleness.fingerprint(positions)
         rows += [item.matrix[:3].T, sums[item.mesh_key]]
     rows = np.concatenate(rows) if rows else np.zeros((0, 3))
     head = np.array([[len(rows), 0.0, 0.0], np.abs(rows).max(axis=0, initial=0.0)])

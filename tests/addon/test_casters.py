@@ -335,3 +335,29 @@ def test_the_cache_goes_stale_when_a_caster_moves_or_the_casters_change(scene, b
     assert "shadow casters changed" in cache.why_invalid(plane, scene)
     scene.hemishadow.casters = None
     assert "shadow casters changed" in cache.why_invalid(plane, scene)
+
+
+def test_a_render_subdividing_a_caster_more_still_uses_the_cache(scene, tmp_path):
+    """Renders evaluate Subdivision at its render levels: the caster has more vertices than
+    in the bake's viewport, its original ones in place. That is not a moved caster."""
+    plane = ground(scene, segments=8)
+    bpy.ops.mesh.primitive_monkey_add(location=(0.0, 0.0, 1.0))
+    monkey = bpy.context.object
+    subdivision = monkey.modifiers.new("Subdivision", "SUBSURF")
+    subdivision.levels, subdivision.render_levels = 1, 2
+    casters_collection(scene, [plane, monkey])
+    bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "render.blend"))
+    bake.bake_range(scene, [plane], 1, 2)
+    scene.hemishadow.live = True
+    camera = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
+    camera.location = (0.0, -4.0, 2.0)
+    scene.collection.objects.link(camera)
+    scene.camera = camera
+    scene.render.engine = "CYCLES"
+    scene.cycles.samples = 1
+    scene.render.resolution_x = scene.render.resolution_y = 8
+    scene.frame_start = scene.frame_end = 2
+    scene.render.filepath = str(tmp_path / "frame_")
+    engine_bridge.last_timings.clear()
+    bpy.ops.render.render(animation=True)
+    assert cache.stale_reason(plane) is None and plane.name not in engine_bridge.last_timings
