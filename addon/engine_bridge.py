@@ -7,7 +7,9 @@ or albedo only re-shades (a matrix product), and a depsgraph update that did not
 vertex (for instance the one our own attribute writes cause) computes nothing.
 
 Which objects are computed (one per shared mesh; not curves or text; instances) is decided
-in objects.py; every error message starts with the object's name (`named_errors`).
+in objects.py; every error message starts with the object's name (`named_errors`). An
+object with shadow casters (casters.py) is solved with them: the state of its casters is
+part of what makes a result current.
 
 Time is split into Blender I/O (reading the evaluated mesh, writing attributes) and engine
 time (transfer, shading), per object, in `last_timings`.
@@ -162,12 +164,10 @@ def solve_object(request, progress=None):
     casters = {} if request.casters is None else request.casters.solve_arguments(request.frame)
     with request.entry.lock, _named(request.name):
         t0 = time.perf_counter()
-        try:
-            transfer = request.entry.solver.solve(request.vertices, request.normals, request.view, progress=progress,
-                                                  **casters)
-        finally:
-            if request.casters is not None:
-                request.casters.release()
+        transfer = request.entry.solver.solve(request.vertices, request.normals, request.view, progress=progress,
+                                              **casters)
+        if request.casters is not None:  # a cancelled request may run again (jobs.finish_all): held till dropped
+            request.casters.release()
         request.solve_seconds = seconds = time.perf_counter() - t0
     # The engine answers a repeated solve of the same positions from a cache in no time:
     # decay rather than forget, so a heavy object does not pass for light after one.

@@ -259,11 +259,9 @@ class FrameInput:
         import hemishadow
 
         shadows = {} if self.casters is None else self.casters.solve_arguments(self.frame)
-        try:
-            solved = self.solver.solve(self.vertices, self.normals, view=self.view, progress=progress, **shadows)
-        finally:
-            if self.casters is not None:
-                self.casters.release()
+        solved = self.solver.solve(self.vertices, self.normals, view=self.view, progress=progress, **shadows)
+        if self.casters is not None:
+            self.casters.release()   # else when the input is dropped
         transfer = engine_bridge.to_world_transfer(solved, self.frame.rotation)
         radiance = hemishadow.shade(transfer, self.lighting, self.albedo)
         if self.lamps:   # numpy only: safe in the worker

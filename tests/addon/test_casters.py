@@ -6,6 +6,7 @@ a plane's vertices under a cube must get the Scene's ambient occlusion.
 """
 
 import sys
+import threading
 
 import numpy as np
 import pytest
@@ -17,7 +18,7 @@ import hemishadow  # noqa: E402
 from conftest import ROOT  # noqa: E402
 
 sys.path.insert(0, str(ROOT))
-from addon import cache, casters, engine_bridge, mesh_io  # noqa: E402
+from addon import cache, casters, engine_bridge, jobs, mesh_io  # noqa: E402
 from addon.operators import bake  # noqa: E402
 from layers import attribute  # noqa: E402
 from spies import count_solves  # noqa: E402
@@ -232,6 +233,36 @@ def test_a_scene_held_by_a_solve_is_not_changed_meanwhile(scene):
     box.location.x = -1.0
     again = casters.for_object(plane, scene, bpy.context.evaluated_depsgraph_get())
     assert again.caster_scene is held.caster_scene and again.version > version, "free again: updated in place"
+
+
+def test_a_worker_solves_with_the_casters_of_its_own_frame(scene, monkeypatch):
+    """A heavy object solved in the worker (jobs.py) after the main thread moved on."""
+    plane, box = ground(scene), cube(scene)
+    casters_collection(scene, [plane, box])
+    for frame, x in ((1, -1.0), (10, 1.0)):
+        box.location.x = x
+        box.keyframe_insert("location", frame=frame)
+    monkeypatch.setattr(jobs, "HEAVY_VERTICES", 0)
+    entered, gate, real = threading.Event(), threading.Event(), engine_bridge.solve_object
+
+    def gated(request, progress=None):
+        if threading.current_thread() is not threading.main_thread():
+            entered.set()
+            gate.wait(30)
+        return real(request, progress)
+
+    monkeypatch.setattr(engine_bridge, "solve_object", gated)
+    try:
+        scene.frame_set(1)
+        jobs.update_scene(scene, bpy.context.evaluated_depsgraph_get(), [plane], interactive=True)
+        assert entered.wait(30) and jobs.pending([plane])
+        scene.frame_set(10)   # the main thread brings the casters to frame 10 meanwhile
+        casters.for_object(plane, scene, bpy.context.evaluated_depsgraph_get()).release()
+    finally:
+        gate.set()
+    jobs.finish_all()
+    ao, points = attribute(plane, mesh_io.AO), world_vertices(plane)
+    assert ao[under(points, (-1.0, 0.0))].max() < 0.8 and ao[under(points, (1.0, 0.0))].min() > 0.9
 
 
 # -- instancing ----------------------------------------------------------------------------
