@@ -22,12 +22,16 @@ the frame its own positions were read at.
 """
 
 import contextlib
+import itertools
 import threading
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from . import mesh_io
+
+#: Versions of all CasterScenes: a receiver's result names the state of its casters by one.
+_versions = itertools.count(1)
 
 #: Object types that draw nothing a shadow could come from; left out without a note.
 _NO_SURFACE = {"EMPTY", "LIGHT", "LIGHT_PROBE", "CAMERA", "ARMATURE", "LATTICE", "SPEAKER"}
@@ -118,8 +122,8 @@ class _Mesh:
 
 @dataclass(eq=False)
 class CasterScene:
-    """A hemishadow.Scene of one collection and what it was built from. `version` grows with
-    every change of the scene, so a receiver's result is known current by it."""
+    """A hemishadow.Scene of one collection and what it was built from. `version` is new (in
+    all scenes) after every change, so a receiver's result is known current by it."""
 
     scene: object = None
     meshes: dict = field(default_factory=dict)       # mesh_key -> _Mesh
@@ -128,7 +132,7 @@ class CasterScene:
     build_notes: list = field(default_factory=list)   # what the engine refused at the last build
     version: int = 0
     users: int = 0
-    lock: threading.Lock = field(default_factory=threading.Lock)
+    lock: threading.RLock = field(default_factory=threading.RLock)  # a Use may be collected anywhere
 
     @property
     def busy(self):
@@ -165,14 +169,15 @@ class CasterScene:
                 self.scene.set_matrix(instance_id, item.matrix)
                 self.instances[item.key] = (instance_id, item.matrix.tobytes(), owner)
                 changed = True
-        self.version += changed
+        if changed:
+            self.version = next(_versions)
         return changed
 
     def _build(self, items):
         import hemishadow
 
         self.scene, self.meshes, self.instances, self.build_notes = hemishadow.Scene(), {}, {}, []
-        self.version += 1
+        self.version = next(_versions)
         for mesh_key, item in _first_per_mesh(items).items():
             positions, triangles = _positions(item.mesh), mesh_io.triangles_of(item.mesh)
             try:
@@ -201,16 +206,9 @@ class CasterScene:
     def notes(self):
         return self.found_notes + self.build_notes
 
-    @property
-    def mesh_count(self):
-        return len(self.meshes)
-
     def own_instances(self, obj):
         """Instance ids of the object itself (drawn directly): its solver shadows it."""
         return tuple(i for i, _, owner in self.instances.values() if owner == obj.session_uid and i is not None)
-
-    def blockers(self, exclude=()):
-        return [i for i, _, _ in self.instances.values() if i is not None and i not in exclude]
 
 
 def _first_per_mesh(items):
@@ -255,7 +253,7 @@ class Use:
     def key(self, frame):
         """What the receiver's result depends on besides its own positions: this state of the
         casters and where the receiver's frame is among them."""
-        return id(self.caster_scene), self.version, self.exclude, to_world(frame).tobytes()
+        return self.version, self.exclude, to_world(frame).tobytes()
 
     def note(self):
         skipped = "; ".join(self.notes)
@@ -323,13 +321,6 @@ def for_object(obj, scene, depsgraph):
     if not caster_scene.instances:
         return None
     return Use(caster_scene, collection.name, caster_scene.own_instances(obj))
-
-
-def notes_for(obj, scene):
-    """The last notes of the object's casters (skipped objects), for the panel."""
-    collection = collection_of(obj, scene)
-    pool = _pools.get(collection.session_uid) if collection is not None else None
-    return list(pool[0].notes) if pool else []
 
 
 def forget():
