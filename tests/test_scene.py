@@ -384,3 +384,54 @@ def test_phong_and_bands_follow_the_mesh_api():
     glossy = scene.transfer(p, [[0, 0, 1.0]], brdf="phong", exponent=8, view=[0, 0, 1])
     assert math.isclose(float(glossy[0, 0]), 0.282095, rel_tol=0.02)  # open: normalised Phong reflects everything
     assert scene.transfer(p, n)[0, 0] < 0.05 * ref.AO_SCALE  # facing the plane: blocked
+
+
+def test_instances_show_their_own_radiance():
+    """Two instances of one roof, one given its own radiance: the receiver under each sees its
+    instance's colour, exactly as with two separate meshes."""
+    v, t = grid(0.5, 4, z=1.0, facing_down=True)
+    left, right = np.eye(4), np.eye(4)
+    left[0, 3], right[0, 3] = -0.6, 0.6
+    red, blue = np.tile([1.0, 0, 0], (len(v), 1)), np.tile([0, 0, 1.0], (len(v), 1))
+    shared = hemishadow.Scene()
+    roof = shared.add_mesh(v, t)
+    shared.add_instance(roof, left)
+    second = shared.add_instance(roof, right)
+    shared.set_radiance(roof, red)
+    points, normals = np.array([[-0.6, 0.0, 0.0], [0.6, 0.0, 0.0]]), np.tile([0, 0, 1.0], (2, 1))
+    before = shared.gather(points, normals, bands=1)[:, 0]
+    assert (before[:, 0] > 0.2).all() and (before[:, 2] == 0).all()  # both red
+    shared.set_radiance(roof, blue, instance_id=second)
+    after = shared.gather(points, normals, bands=1)[:, 0]
+    separate = hemishadow.Scene()
+    for matrix, colour in ((left, red), (right, blue)):
+        mesh = separate.add_mesh(v, t)
+        separate.add_instance(mesh, matrix)
+        separate.set_radiance(mesh, colour)
+    np.testing.assert_allclose(after, separate.gather(points, normals, bands=1)[:, 0], atol=1e-6)
+    assert after[0, 0] > after[0, 2] and after[1, 2] > after[1, 0]  # each sees most of its own roof
+    np.testing.assert_allclose(after[:, 0] + after[:, 2], before[:, 0], rtol=1e-5)  # the same geometry, recoloured
+    with pytest.raises(ValueError, match="places mesh"):
+        separate.set_radiance(0, red, instance_id=1)
+    with pytest.raises(ValueError, match="instance id"):
+        shared.set_radiance(roof, red, instance_id=7)
+
+
+def test_irradiance_is_transfer_under_the_lighting():
+    """Uniform radiance 1 gives pi on an open receiver, and AO x pi under a blocker (against
+    Embree); any lighting gives transfer . lighting."""
+    scene = room().engine(hemishadow)
+    points, normals = np.array([[0.5, -0.5, 0.01], [9.0, 9.0, 9.0]]), np.array([[0, 0, 1.0], [0, 0, 1.0]])
+    uniform = np.zeros((9, 3))
+    uniform[0] = 2.0 * np.sqrt(np.pi)  # L(s) = 1: the coefficient of Y_0 = 1 / (2 sqrt(pi))
+    e = scene.irradiance(points, normals, uniform)
+    assert e.shape == (2, 3) and e.dtype == np.float32
+    np.testing.assert_allclose(e[1], np.pi, rtol=2e-3)  # far outside the room: open sky
+    np.testing.assert_allclose(e[0] / np.pi, scene.ambient_occlusion(points[:1], normals[:1])[0], rtol=2e-3)
+    assert e[0, 0] < 0.9 * np.pi
+    lighting = np.random.default_rng(3).normal(size=(16, 3))
+    np.testing.assert_allclose(scene.irradiance(points, normals, lighting),
+                               scene.transfer(points, normals, bands=4) @ lighting, rtol=1e-5, atol=1e-5)
+    for bad in (np.zeros((8, 3)), np.zeros((9, 2)), np.full((9, 3), np.nan)):
+        with pytest.raises(ValueError):
+            scene.irradiance(points, normals, bad)

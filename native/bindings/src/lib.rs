@@ -216,7 +216,10 @@ impl PySolver {
     }
 
     /// Transfer (N, bands^2) for this frame's positions.
-    #[pyo3(signature = (vertices, normals, view, views, progress=None))]
+    /// `casters`: a Scene whose blockers shadow the mesh too, `to_world` (4x4, rigid) placing
+    /// the vertices in its world, `exclude` its instances left out.
+    #[pyo3(signature = (vertices, normals, view, views, progress=None, casters=None, to_world=None, exclude=None))]
+    #[allow(clippy::too_many_arguments)]
     fn solve<'py>(
         &mut self,
         py: Python<'py>,
@@ -225,16 +228,33 @@ impl PySolver {
         view: Option<PyReadonlyArray1<f32>>,
         views: Option<PyReadonlyArray2<f32>>,
         progress: Option<Py<PyAny>>,
+        casters: Option<Bound<'py, scene::PyScene>>,
+        to_world: Option<PyReadonlyArray2<f64>>,
+        exclude: Option<PyReadonlyArray1<u32>>,
     ) -> PyResult<Bound<'py, PyArray2<f32>>> {
         let vertices = rows3(&vertices, "vertices")?;
         let normals = normals.map(|n| rows3(&n, "normals")).transpose()?;
         let view = view_argument(view, views)?;
+        let to_world = to_world.map(|m| scene::matrix16(&m)).transpose()?;
+        let exclude: Vec<u32> = exclude.map(|e| e.as_array().to_vec()).unwrap_or_default();
         let n = vertices.len();
         let k = self.inner.coeffs();
+        if let Some(c) = casters.as_ref().filter(|c| !c.borrow().inner.prepared()) {
+            let mut c = c.try_borrow_mut()?;
+            let scene = &mut c.inner;
+            run(py, || Ok(scene.prepare()))?;
+        }
+        // Shared from here on: other objects' solves may read the same scene meanwhile.
+        let casters = casters.as_ref().map(|c| c.try_borrow()).transpose()?;
+        let scene = casters.as_ref().map(|c| &*c.inner);
         let inner = &mut self.inner;
         let mut reporter = PyProgress::new(progress);
         let report = &mut reporter;
-        let result = run(py, || inner.solve_with_progress(&vertices, normals.as_deref(), view.as_ref(), &mut |f| report.report(f)));
+        let result = run(py, || {
+            let place = to_world.as_ref().map_or(Ok(engine::scene::casters::Rigid::IDENTITY), engine::scene::casters::Rigid::from_rows)?;
+            let casters = scene.map(|s| s.casters(&exclude, place)).transpose()?;
+            inner.solve_with_casters(&vertices, normals.as_deref(), view.as_ref(), casters.as_ref(), &mut |f| report.report(f))
+        });
         let values = reporter.finish(result)?;
         Ok(matrix(values, n, k, py))
     }

@@ -13,10 +13,10 @@ use crate::{rows3, run, triangles3, vec3, PyProgress};
 #[pyclass(name = "Scene", module = "hemishadow._native")]
 pub struct PyScene {
     /// Boxed for the same reason as the solver: Python objects are only 16-byte aligned.
-    inner: Box<engine::scene::Scene>,
+    pub(crate) inner: Box<engine::scene::Scene>,
 }
 
-fn matrix16(m: &PyReadonlyArray2<f64>) -> PyResult<[f64; 16]> {
+pub(crate) fn matrix16(m: &PyReadonlyArray2<f64>) -> PyResult<[f64; 16]> {
     let view = m.as_array();
     if view.shape() != [4, 4] {
         return Err(PyValueError::new_err(format!("matrix must have shape (4, 4), got {:?}", view.shape())));
@@ -59,6 +59,12 @@ impl PyScene {
         let c = rows3(&rgb, "rgb")?;
         let inner = &mut self.inner;
         run(py, || inner.set_radiance(mesh, &c))
+    }
+
+    fn set_instance_radiance(&mut self, py: Python<'_>, instance: u32, rgb: PyReadonlyArray2<f32>) -> PyResult<()> {
+        let c = rows3(&rgb, "rgb")?;
+        let inner = &mut self.inner;
+        run(py, || inner.set_instance_radiance(instance, &c))
     }
 
     fn set_lod(&mut self, py: Python<'_>, lod: f32) -> PyResult<()> {

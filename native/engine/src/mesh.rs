@@ -107,6 +107,12 @@ impl Normalization {
         [0, 1, 2].map(|a| ((p[a] as f64 - self.centre[a]) * self.scale) as f32)
     }
 
+    /// Normalised -> mesh units, in double precision.
+    #[inline]
+    pub fn invert(&self, p: Vec3) -> [f64; 3] {
+        [0, 1, 2].map(|a| p[a] as f64 / self.scale + self.centre[a])
+    }
+
     pub fn apply_all(&self, points: impl Iterator<Item = Vec3>) -> Vec<Vec3> {
         points.map(|p| self.apply(p)).collect()
     }

@@ -21,6 +21,7 @@ use crate::pvs::{contributing, Pvs};
 use crate::plane_table::PlaneTable;
 use crate::packets::{PacketLists, LANES};
 use crate::rasterizer::Pipeline;
+use crate::scene::casters::{Casters, CastersKey};
 use crate::sh::ShBasis;
 use crate::transfer::{check_brdf, checked_downsample, checked_offset, welded_views, Receiver, Settings, View};
 
@@ -68,6 +69,7 @@ struct LastFrame {
     views: Option<Vec<Vec3>>,
     group_bounds: Vec<[Vec3; 2]>,
     used_pvs: bool,
+    casters: Option<CastersKey>,
     transfer: Vec<f32>,
 }
 
@@ -198,23 +200,30 @@ impl Solver {
         view: Option<&View>,
         progress: Progress,
     ) -> Result<Vec<f32>> {
-        if vertices.len() != self.remap.len() {
-            return Err(Error::invalid(format!(
-                "the solver was built for {} vertices, got {}: the topology changed, build a new solver",
-                self.remap.len(),
-                vertices.len()
-            )));
-        }
+        self.solve_with_casters(vertices, normals, view, None, progress)
+    }
+
+    /// `solve_with_progress` with a scene's blockers (`casters`) rasterized into each
+    /// receiver's mask after the mesh's own: shadows cast by other objects.
+    pub fn solve_with_casters(
+        &mut self,
+        vertices: &[Vec3],
+        normals: Option<&[Vec3]>,
+        view: Option<&View>,
+        casters: Option<&Casters>,
+        progress: Progress,
+    ) -> Result<Vec<f32>> {
         let frame = self.prepare(vertices, normals, view)?;
-        let reusable = self.reusable_receivers(&frame);
+        let casters_key = casters.map(|c| c.key().clone());
+        let reusable = self.reusable_receivers(&frame, &casters_key);
         let k = self.coeffs();
         let mut welded = vec![0.0f32; frame.positions.len() * k];
         let blockers = AtomicU64::new(0);
         let reused = reusable.iter().filter(|&&r| r).count();
-        par_rows(&mut welded, k, progress, || (), |r, _, out| match (&self.last, reusable[r]) {
+        par_rows(&mut welded, k, progress, Vec::new, |r, scratch, out| match (&self.last, reusable[r]) {
             (Some(last), true) => out.copy_from_slice(&last.transfer[r * k..(r + 1) * k]),
             _ => {
-                let count = self.receiver(r, &frame, out);
+                let count = self.receiver(r, &frame, casters, scratch, out);
                 blockers.fetch_add(count, Ordering::Relaxed);
             }
         })?;
@@ -228,7 +237,7 @@ impl Solver {
         let result = self.remap.iter().flat_map(|&w| welded[w as usize * k..(w as usize + 1) * k].iter().copied()).collect();
         if self.blockers.reuse {
             let Frame { positions, normals, views, group_bounds, use_pvs, .. } = frame;
-            self.last = Some(LastFrame { positions, normals, views, group_bounds, used_pvs: use_pvs, transfer: welded });
+            self.last = Some(LastFrame { positions, normals, views, group_bounds, used_pvs: use_pvs, casters: casters_key, transfer: welded });
         }
         Ok(result)
     }
@@ -384,10 +393,10 @@ impl Solver {
     /// Receivers whose result cannot differ from the last frame's: same position, normal and
     /// view, and every group of blockers that moved lies below its horizon in both frames
     /// (so it contributed nothing then and contributes nothing now).
-    fn reusable_receivers(&self, frame: &Frame) -> Vec<bool> {
+    fn reusable_receivers(&self, frame: &Frame, casters: &Option<CastersKey>) -> Vec<bool> {
         let n = frame.positions.len();
         let Some(last) = self.last.as_ref().filter(|_| self.blockers.reuse) else { return vec![false; n] };
-        if last.views != frame.views || last.used_pvs != frame.use_pvs {
+        if last.views != frame.views || last.used_pvs != frame.use_pvs || &last.casters != casters {
             return vec![false; n];
         }
         let moved: Vec<bool> = (0..n).map(|v| frame.positions[v] != last.positions[v] || frame.normals[v] != last.normals[v]).collect();
@@ -416,27 +425,27 @@ impl Solver {
 
     /// Transfer of welded receiver `r` into `out`; returns the number of blockers rasterized.
     /// The hot loop is compiled twice, for AVX2 + FMA and for the baseline, and picked at run time.
-    fn receiver(&self, r: usize, frame: &Frame, out: &mut [f32]) -> u64 {
+    fn receiver(&self, r: usize, frame: &Frame, casters: Option<&Casters>, scratch: &mut Vec<Vec3>, out: &mut [f32]) -> u64 {
         #[cfg(target_arch = "x86_64")]
         if std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma") {
             // SAFETY: the CPU supports the features the function is compiled for.
-            return unsafe { self.receiver_avx2(r, frame, out) };
+            return unsafe { self.receiver_avx2(r, frame, casters, scratch, out) };
         }
-        self.receiver_portable(r, frame, out)
+        self.receiver_portable(r, frame, casters, scratch, out)
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
-    unsafe fn receiver_avx2(&self, r: usize, frame: &Frame, out: &mut [f32]) -> u64 {
-        self.receiver_portable(r, frame, out)
+    unsafe fn receiver_avx2(&self, r: usize, frame: &Frame, casters: Option<&Casters>, scratch: &mut Vec<Vec3>, out: &mut [f32]) -> u64 {
+        self.receiver_portable(r, frame, casters, scratch, out)
     }
 
     /// Per group of clusters (skipped whole when below the horizon): the coarse triangles of
     /// the clusters seen from afar, then the fine packets of the clusters seen at full
     /// resolution (the receiver's ring and clusters close to it), each packet skipped when
-    /// its box is below the horizon.
+    /// its box is below the horizon; then the casters' blockers, if any.
     #[inline(always)]
-    fn receiver_portable(&self, r: usize, frame: &Frame, out: &mut [f32]) -> u64 {
+    fn receiver_portable(&self, r: usize, frame: &Frame, casters: Option<&Casters>, scratch: &mut Vec<Vec3>, out: &mut [f32]) -> u64 {
         let Some(receiver) = Receiver::new(frame.positions[r], frame.normals[r], self.offset) else {
             out.fill(0.0);
             return 0;
@@ -485,9 +494,13 @@ impl Solver {
             }
         }
         pipeline.drain(table, &mut mask);
+        let mut rasterized = rasterized as u64;
+        if let Some(casters) = casters.filter(|_| mask != self.disk) {
+            rasterized += casters.occlude(table, &self.normalization, &receiver, self.disk, &mut mask, scratch);
+        }
         let view = frame.views.as_ref().map_or(receiver.frame.n, |v| v[r]);
         self.quadrature.integrate(&mask, &receiver.frame, self.brdf, view, out);
-        rasterized as u64
+        rasterized
     }
 }
 

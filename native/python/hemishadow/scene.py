@@ -4,6 +4,8 @@ Receivers are arbitrary points with a normal (lightmap texels, probes, panorama 
 mesh vertices; see `Scene`.
 """
 
+import math
+
 import numpy as np
 
 from . import _checks, _native
@@ -58,6 +60,7 @@ class Scene:
     def __init__(self, *, lod=None):
         self._native = _native.Scene()
         self._meshes = []  # vertex count per mesh
+        self._instances = []  # mesh id per instance
         if lod is not None:
             self.lod = lod
 
@@ -99,7 +102,9 @@ class Scene:
         """Places mesh `mesh_id` with a 4x4 world matrix (identity when None); returns the
         instance's id."""
         mesh_id = self._mesh_id(mesh_id)
-        return self._native.add_instance(mesh_id, _matrix(np.eye(4) if matrix is None else matrix))
+        instance_id = self._native.add_instance(mesh_id, _matrix(np.eye(4) if matrix is None else matrix))
+        self._instances.append(mesh_id)
+        return instance_id
 
     def set_vertices(self, mesh_id, vertices):
         """New positions (V, 3) for a mesh that moves; same vertex count and triangles."""
@@ -108,16 +113,21 @@ class Scene:
 
     def set_matrix(self, instance_id, matrix):
         """A new world matrix for an instance."""
-        count = self._native.instance_count
-        if isinstance(instance_id, bool) or not isinstance(instance_id, (int, np.integer)) or not 0 <= instance_id < count:
-            raise ValueError(f"instance id must be an integer in 0..{count - 1}, got {instance_id!r}")
-        self._native.set_matrix(int(instance_id), _matrix(matrix))
+        self._native.set_matrix(self._instance_id(instance_id), _matrix(matrix))
 
-    def set_radiance(self, mesh_id, rgb):
+    def set_radiance(self, mesh_id, rgb, *, instance_id=None):
         """Outgoing radiance per vertex (V, 3) of a mesh, seen by `gather` (black until set).
-        Every instance of the mesh shows the same radiance."""
+        Every instance of the mesh shows it, except those given their own: with `instance_id`
+        (an instance of this mesh), only that instance shows `rgb`, instead of the mesh's."""
         mesh_id = self._mesh_id(mesh_id)
-        self._native.set_radiance(mesh_id, _checks.float_array(rgb, "rgb", (self._meshes[mesh_id], 3)))
+        rgb = _checks.float_array(rgb, "rgb", (self._meshes[mesh_id], 3))
+        if instance_id is None:
+            self._native.set_radiance(mesh_id, rgb)
+            return
+        instance_id = self._instance_id(instance_id)
+        if self._instances[instance_id] != mesh_id:
+            raise ValueError(f"instance {instance_id} places mesh {self._instances[instance_id]}, not mesh {mesh_id}")
+        self._native.set_instance_radiance(instance_id, rgb)
 
     def prepare(self):
         """Builds the hierarchy now (otherwise the first query does)."""
@@ -137,6 +147,16 @@ class Scene:
         return self._native.transfer(pts, norms, _checks.band_count(bands), exponent, view_one, view_each,
                                      _checks.offset(offset), int(table_resolution),
                                      None if downsample is None else int(downsample), _checks.progress(progress))
+
+    def irradiance(self, points, normals, lighting, *, offset=None, progress=None):
+        """Irradiance float32 (P, 3) under distant lighting given as radiance SH (K, 3) in the
+        binding convention (K = bands^2, as `hemishadow.shade` takes it): transfer . lighting,
+        the integral of L(s) V(s) max(0, n.s) over the hemisphere."""
+        light = _checks.float_array(lighting, "lighting", (-1, 3))
+        bands = math.isqrt(len(light))
+        if bands * bands != len(light) or not 1 <= bands <= 8:
+            raise ValueError(f"lighting must hold bands^2 rows of SH coefficients (1 to 8 bands), got {len(light)} rows")
+        return (self.transfer(points, normals, bands=bands, offset=offset, progress=progress) @ light).astype(np.float32)
 
     def ambient_occlusion(self, points, normals, *, offset=None):
         """Ambient occlusion (P,) float32: T_0 / 0.886227, 1 when nothing is in the way."""
@@ -171,6 +191,12 @@ class Scene:
     def _receivers(self, points, normals):
         pts = _checks.points(points, "points")
         return pts, _normals(normals, len(pts))
+
+    def _instance_id(self, instance_id):
+        count = len(self._instances)
+        if isinstance(instance_id, bool) or not isinstance(instance_id, (int, np.integer)) or not 0 <= instance_id < count:
+            raise ValueError(f"instance id must be an integer in 0..{count - 1}, got {instance_id!r}")
+        return int(instance_id)
 
     def _mesh_id(self, mesh_id):
         if isinstance(mesh_id, bool) or not isinstance(mesh_id, (int, np.integer)) or not 0 <= mesh_id < len(self._meshes):

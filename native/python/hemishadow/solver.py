@@ -4,6 +4,7 @@ every frame with new positions."""
 import numpy as np
 
 from . import _checks, _native
+from .scene import Scene, _matrix
 
 # Largest vertex displacement from a sampled pose (fraction of the rest pose's half size) up
 # to which a frame uses the potentially visible sets; measured in docs/algorithm.md.
@@ -109,15 +110,39 @@ class TransferSolver:
         info = self._solver.pvs_info()
         return None if info is None else dict(zip(("poses", "clusters_per_vertex", "tolerance"), info))
 
-    def solve(self, vertices, normals=None, view=None, *, progress=None):
+    def solve(self, vertices, normals=None, view=None, *, progress=None, casters=None, to_world=None, exclude=()):
         """Transfer (N, bands^2) float32 for this frame's positions (N, 3); normals, view and
         progress as in `hemishadow.transfer`. The GIL is released while receivers are computed,
         so a solve may run in a worker thread; use one solver from one thread at a time. A
-        cancelled solve leaves the solver as it was."""
+        cancelled solve leaves the solver as it was.
+
+        Shadows from other objects: `casters`, a `hemishadow.Scene`, whose blockers are
+        rasterized into each receiver's mask after the mesh's own; `to_world` (4, 4), a rigid
+        matrix (orthogonal 3x3 part, a mirror allowed) placing `vertices` in the scene's world
+        (None: they are in it already); `exclude`, ids of the scene's instances left out (this
+        mesh's own, which the solver shadows itself). Solvers of several objects may read one
+        scene at the same time; editing it while a solve reads it raises RuntimeError. The
+        last result is reused only while the scene, `to_world` and `exclude` stay the same."""
         verts = _checks.points(vertices, "vertices")
         if len(verts) != self.vertex_count:
             raise ValueError(f"the solver was built for {self.vertex_count} vertices, got {len(verts)}: "
                              "the topology changed, build a new solver")
         norms = None if normals is None else _checks.float_array(normals, "normals", (len(verts), 3))
         view_one, view_each = _checks.view_arrays(self.brdf, view, len(verts))
-        return self._solver.solve(verts, norms, view_one, view_each, _checks.progress(progress))
+        scene, place, skip = _casters(casters, to_world, exclude)
+        return self._solver.solve(verts, norms, view_one, view_each, _checks.progress(progress), scene, place, skip)
+
+
+def _casters(casters, to_world, exclude):
+    """(native scene or None, float64 (4, 4) or None, uint32 ids or None) for `solve`."""
+    if casters is None:
+        if to_world is not None or len(exclude):
+            raise ValueError("to_world and exclude need casters (a hemishadow.Scene)")
+        return None, None, None
+    if not isinstance(casters, Scene):
+        raise TypeError(f"casters must be a hemishadow.Scene, got {type(casters).__name__}")
+    place = None if to_world is None else _matrix(to_world, "to_world")
+    ids = np.asarray(exclude if exclude is not None else (), dtype=np.int64).reshape(-1)
+    if (ids < 0).any():
+        raise ValueError(f"exclude holds instance ids, got {int(ids.min())}")
+    return casters._native, place, np.ascontiguousarray(ids, dtype=np.uint32)

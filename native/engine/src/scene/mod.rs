@@ -11,6 +11,7 @@
 //! instances builds what is new (and rebuilds the top tree, which is cheap).
 
 pub mod affine;
+pub mod casters;
 pub mod clusters;
 pub mod gather;
 pub mod ordered;
@@ -19,6 +20,13 @@ pub mod top;
 pub mod traverse;
 
 use std::sync::atomic::{AtomicU64, Ordering};
+
+/// Source of `Scene::version` values, unique across every scene of the process.
+static VERSIONS: AtomicU64 = AtomicU64::new(1);
+
+fn next_version() -> u64 {
+    VERSIONS.fetch_add(1, Ordering::Relaxed)
+}
 use std::sync::Arc;
 
 use rayon::prelude::*;
@@ -64,12 +72,16 @@ pub struct SceneStats {
 pub struct Scene {
     meshes: Vec<SceneMesh>,
     instances: Vec<(u32, Affine)>,
+    /// Per instance, radiance that overrides its mesh's (`set_instance_radiance`).
+    instance_radiance: Vec<Option<Vec<Rgb>>>,
     instance_bounds: Vec<[Vec3; 2]>,
     top: Option<TopTree>,
     refit_top: bool,
     lod: f32,
     table_resolution: usize,
     stats: SceneStats,
+    /// Changes with every edit of the geometry, placements or level of detail.
+    version: u64,
 }
 
 impl Default for Scene {
@@ -83,12 +95,14 @@ impl Scene {
         Scene {
             meshes: Vec::new(),
             instances: Vec::new(),
+            instance_radiance: Vec::new(),
             instance_bounds: Vec::new(),
             top: None,
             refit_top: false,
             lod: DEFAULT_LOD,
             table_resolution: crate::plane_table::DEFAULT_RESOLUTION,
             stats: SceneStats::default(),
+            version: next_version(),
         }
     }
 
@@ -101,6 +115,7 @@ impl Scene {
         if let Some(t) = triangles.iter().find(|t| t.iter().any(|&v| v as usize >= vertices.len())) {
             return Err(Error::invalid(format!("triangle {t:?} uses a vertex beyond the mesh's {} vertices", vertices.len())));
         }
+        self.version = next_version();
         self.meshes.push(SceneMesh { positions: vertices.to_vec(), triangles: triangles.to_vec(), tree: None, moved: false, radiance: None });
         Ok((self.meshes.len() - 1) as u32)
     }
@@ -110,6 +125,8 @@ impl Scene {
     pub fn add_instance(&mut self, mesh: u32, matrix: &[f64; 16]) -> Result<u32> {
         self.mesh_index(mesh)?;
         self.instances.push((mesh, Affine::from_rows(matrix)?));
+        self.instance_radiance.push(None);
+        self.version = next_version();
         self.top = None;
         Ok((self.instances.len() - 1) as u32)
     }
@@ -126,6 +143,7 @@ impl Scene {
         self.meshes[m].positions.copy_from_slice(vertices);
         self.meshes[m].moved = true;
         self.refit_top = true;
+        self.version = next_version();
         Ok(())
     }
 
@@ -133,6 +151,7 @@ impl Scene {
         let i = self.instance_index(instance)?;
         self.instances[i].1 = Affine::from_rows(matrix)?;
         self.refit_top = true;
+        self.version = next_version();
         Ok(())
     }
 
@@ -150,13 +169,44 @@ impl Scene {
         Ok(())
     }
 
+    /// Outgoing radiance per vertex of one instance's mesh, (V, 3), for `gather`: instances
+    /// of one mesh that are lit differently. Replaces the mesh's radiance for this instance.
+    pub fn set_instance_radiance(&mut self, instance: u32, rgb: &[Rgb]) -> Result<()> {
+        let i = self.instance_index(instance)?;
+        let count = self.meshes[self.instances[i].0 as usize].positions.len();
+        if rgb.len() != count {
+            return Err(Error::invalid(format!("instance {instance}'s mesh has {count} vertices, got {} radiance rows", rgb.len())));
+        }
+        if let Some(v) = rgb.iter().position(|c| !c.iter().all(|v| v.is_finite())) {
+            return Err(Error::invalid(format!("radiance {v} is not finite: {:?}", rgb[v])));
+        }
+        self.instance_radiance[i] = Some(rgb.to_vec());
+        Ok(())
+    }
+
+    /// Per instance, the radiance its blockers show: its own, else its mesh's, else none.
+    fn radiance_by_instance(&self) -> Vec<Option<&[Rgb]>> {
+        self.instances
+            .iter()
+            .zip(&self.instance_radiance)
+            .map(|((m, _), own)| own.as_deref().or(self.meshes[*m as usize].radiance.as_deref()))
+            .collect()
+    }
+
     /// Level of detail (see DEFAULT_LOD); 0 draws every triangle at full resolution.
     pub fn set_lod(&mut self, lod: f32) -> Result<()> {
         if !(lod.is_finite() && (0.0..=1.0).contains(&lod)) {
             return Err(Error::invalid(format!("lod must be between 0 and 1, got {lod}")));
         }
         self.lod = lod;
+        self.version = next_version();
         Ok(())
+    }
+
+    /// Changes whenever the blockers may have changed (see `casters`: a solver reuses nothing
+    /// across versions).
+    pub fn version(&self) -> u64 {
+        self.version
     }
 
     pub fn lod(&self) -> f32 {
@@ -223,6 +273,11 @@ impl Scene {
         }
     }
 
+    /// Whether every mesh has its tree and nothing moved since `prepare`.
+    pub fn prepared(&self) -> bool {
+        self.top.is_some() && !self.refit_top && self.meshes.iter().all(|m| m.tree.is_some() && !m.moved)
+    }
+
     /// The diagonal of the scene's world bounding box (0 when empty); from the geometry
     /// only, so that it does not depend on how the hierarchy was built.
     pub fn size(&mut self) -> f32 {
@@ -252,7 +307,7 @@ impl Scene {
         let quadrature = Quadrature::new(downsample, basis);
         let k = quadrature.basis().coeffs();
         let (trees, positions) = self.walk_parts();
-        let walk = Walk { trees: &trees, positions: &positions, instances: &self.instances, top: self.top.as_ref().expect("prepared"), lod: self.lod };
+        let walk = Walk { trees: &trees, positions: &positions, instances: &self.instances, top: self.top.as_ref().expect("prepared"), lod: self.lod, exclude: &[] };
         let full = disk();
         let counted = AtomicU64::new(0);
         let mut out = vec![0.0f32; points.len() * k];
@@ -276,7 +331,7 @@ impl Scene {
         let offset = receivers::offset(offset, self.size())?;
         let table = PlaneTable::shared(self.table_resolution)?;
         let (trees, positions) = self.walk_parts();
-        let walk = Walk { trees: &trees, positions: &positions, instances: &self.instances, top: self.top.as_ref().expect("prepared"), lod: self.lod };
+        let walk = Walk { trees: &trees, positions: &positions, instances: &self.instances, top: self.top.as_ref().expect("prepared"), lod: self.lod, exclude: &[] };
         let full = disk();
         Ok(points
             .par_iter()
@@ -296,8 +351,8 @@ impl Scene {
         let offset = receivers::offset(offset, self.size())?;
         let table = PlaneTable::shared(self.table_resolution)?;
         let (trees, positions) = self.walk_parts();
-        let walk = Walk { trees: &trees, positions: &positions, instances: &self.instances, top: self.top.as_ref().expect("prepared"), lod: self.lod };
-        let radiance: Vec<Option<&[Rgb]>> = vec![None; self.meshes.len()];
+        let walk = Walk { trees: &trees, positions: &positions, instances: &self.instances, top: self.top.as_ref().expect("prepared"), lod: self.lod, exclude: &[] };
+        let radiance: Vec<Option<&[Rgb]>> = vec![None; self.instances.len()];
         Ok(points
             .par_iter()
             .zip(normals)
@@ -319,8 +374,8 @@ impl Scene {
         let offset = receivers::offset(offset, self.size())?;
         let table = PlaneTable::shared(self.table_resolution)?;
         let (trees, positions) = self.walk_parts();
-        let walk = Walk { trees: &trees, positions: &positions, instances: &self.instances, top: self.top.as_ref().expect("prepared"), lod: self.lod };
-        let radiance: Vec<Option<&[Rgb]>> = self.meshes.iter().map(|m| m.radiance.as_deref()).collect();
+        let walk = Walk { trees: &trees, positions: &positions, instances: &self.instances, top: self.top.as_ref().expect("prepared"), lod: self.lod, exclude: &[] };
+        let radiance = self.radiance_by_instance();
         let k = projector.coeffs();
         let mut out = vec![0.0f32; points.len() * k * 3];
         par_rows(&mut out, k * 3, progress, Vec::new, |r, scratch, row| {

@@ -26,7 +26,7 @@ const TIE: f32 = 1e-4;
 
 pub struct DepthSink<'a> {
     table: &'a PlaneTable,
-    /// Per mesh, its per-vertex radiance (None: black).
+    /// Per instance, its per-vertex radiance (None: black).
     radiance: &'a [Option<&'a [Rgb]>],
     pub depth: [f32; MASK_CELLS],
     /// Cells whose nearest blocker shows its back.
@@ -68,7 +68,7 @@ impl Sink for DepthSink<'_> {
         let (nn, na) = (dot(normal, normal), dot(normal, a));
         // Receiver at the origin: it sees the winding's back when the plane's normal points away.
         let back = tag.facing * na > 0.0;
-        let corners = self.radiance[tag.mesh as usize].map(|r| ids.map(|v| r[v as usize]));
+        let corners = self.radiance[tag.instance as usize].map(|r| ids.map(|v| r[v as usize]));
         let directions = cell_directions();
         for (w, &word) in covered.0.iter().enumerate() {
             let mut bits = word;
@@ -108,7 +108,7 @@ mod tests {
         PlaneTable::shared(crate::plane_table::DEFAULT_RESOLUTION).unwrap()
     }
 
-    const TAG: Tag = Tag { mesh: 0, facing: 1.0 };
+    const TAG: Tag = Tag { mesh: 0, instance: 0, facing: 1.0 };
 
     #[test]
     fn nearer_roof_wins_whatever_the_order() {
@@ -139,7 +139,7 @@ mod tests {
         sink.triangle(a, b, c, [0, 1, 2], TAG);
         assert!(sink.back.count() > 100);
         let mut sink = DepthSink::new(&t, &meshes);
-        sink.triangle(a, b, c, [0, 1, 2], Tag { mesh: 0, facing: -1.0 });
+        sink.triangle(a, b, c, [0, 1, 2], Tag { mesh: 0, instance: 0, facing: -1.0 });
         assert_eq!(sink.back.count(), 0);
         assert!(sink.covered().count() > 100);
     }

@@ -27,6 +27,7 @@ pub const ERROR_SHARE: f32 = 0.1;
 #[derive(Clone, Copy, Debug)]
 pub struct Tag {
     pub mesh: u32,
+    pub instance: u32,
     /// -1 for an instance with a negative determinant: its winding is turned over.
     pub facing: f32,
 }
@@ -48,6 +49,8 @@ pub struct Walk<'a> {
     pub instances: &'a [(u32, Affine)],
     pub top: &'a TopTree,
     pub lod: f32,
+    /// Instances left out (ascending ids): a solver's own object, which it shadows itself.
+    pub exclude: &'a [u32],
 }
 
 /// A mesh-space to receiver-space map: rows of (frame x linear), and the translation.
@@ -104,6 +107,9 @@ impl Walk<'_> {
                 stack.extend_from_slice(&node.children);
                 continue;
             }
+            if self.exclude.binary_search(&node.instance).is_ok() {
+                continue;
+            }
             self.instance(receiver, node.instance as usize, scratch, sink);
             if sink.done() {
                 return;
@@ -115,7 +121,7 @@ impl Walk<'_> {
         let (mesh, transform) = self.instances[i];
         let (tree, positions) = (self.trees[mesh as usize], self.positions[mesh as usize]);
         let local = Local::new(receiver, &transform);
-        let tag = Tag { mesh, facing: transform.facing };
+        let tag = Tag { mesh, instance: i as u32, facing: transform.facing };
         let lod2 = self.lod * self.lod;
         let error2 = (self.lod * ERROR_SHARE).powi(2);
         let stretch2 = transform.stretch * transform.stretch;
@@ -174,7 +180,12 @@ pub struct MaskSink<'a> {
 
 impl<'a> MaskSink<'a> {
     pub fn new(table: &'a PlaneTable, full: Mask) -> Self {
-        MaskSink { table, batch: TriangleBatch::default(), mask: Mask::EMPTY, full, triangles: 0 }
+        MaskSink::onto(table, Mask::EMPTY, full)
+    }
+
+    /// A sink whose mask starts as `mask` (blockers rasterized already elsewhere).
+    pub fn onto(table: &'a PlaneTable, mask: Mask, full: Mask) -> Self {
+        MaskSink { table, batch: TriangleBatch::default(), mask, full, triangles: 0 }
     }
 
     pub fn finish(mut self) -> (Mask, u64) {
