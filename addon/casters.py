@@ -84,7 +84,9 @@ def _items(collection, depsgraph, notes):
                 notes.append(f"'{name}' skipped: a {kind} object casts no shadow (convert it to a mesh)")
             continue
         if len(evaluated.data.polygons) == 0:
-            notes.append(f"'{name}' skipped: its mesh has no faces")
+            # Geometry nodes that output instances only leave the instancer an empty mesh.
+            if len(evaluated.data.vertices) or not any(m.type == "NODES" for m in source.modifiers):
+                notes.append(f"'{name}' skipped: its mesh has no faces")
             continue
         if instance.is_instance and source == drawer and evaluated.data.original == evaluated.data:
             # Geometry made by the instancer's nodes: no datablock to share by; the n-th such

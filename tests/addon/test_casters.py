@@ -301,6 +301,31 @@ def test_a_collection_instance_casts_without_copies(scene):
     assert ao[under(points, (0.0, 1.6), 0.3)].min() > 0.9
 
 
+def test_geometry_nodes_instances_cast_without_copies(scene):
+    plane = ground(scene)
+    prop = cube(bpy.data.scenes.new("unused"), "Prop", (0.0, 0.0, 0.0), size=0.6)
+    scatter = cube(scene, "Scatter", (0.0, 0.0, 1.5), size=2.0)   # its 8 corners get a prop each
+    tree = bpy.data.node_groups.new("Scatter", "GeometryNodeTree")
+    tree.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
+    tree.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    inputs, outputs = tree.nodes.new("NodeGroupInput"), tree.nodes.new("NodeGroupOutput")
+    on_points, info = tree.nodes.new("GeometryNodeInstanceOnPoints"), tree.nodes.new("GeometryNodeObjectInfo")
+    info.inputs["Object"].default_value = prop
+    info.inputs["As Instance"].default_value = True
+    tree.links.new(inputs.outputs[0], on_points.inputs["Points"])
+    tree.links.new(info.outputs["Geometry"], on_points.inputs["Instance"])
+    tree.links.new(on_points.outputs[0], outputs.inputs[0])
+    scatter.modifiers.new("Scatter", "NODES").node_group = tree
+    casters_collection(scene, [plane, scatter])
+    found = caster_scene(plane, scene)
+    assert (found.scene._native.mesh_count, found.scene._native.instance_count) == (2, 9)
+    assert found.notes == [], "the instancer's own (empty) mesh is no error"
+    ao, points = live_ao(scene, plane), world_vertices(plane)
+    for x in (-1.0, 1.0):
+        for y in (-1.0, 1.0):
+            assert ao[under(points, (x, y), 0.15)].max() < 0.8
+
+
 # -- bad input -----------------------------------------------------------------------------
 
 def test_casters_that_cannot_cast_are_named_not_raised(scene):
