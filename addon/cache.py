@@ -92,7 +92,8 @@ class BakeCache:
                 raise ValueError(f"cache version {meta.get('version')} is not {VERSION}: bake again")
             transfer = npz["transfer"] if "transfer" in npz.files else None
             shadows = npz["casters"] if "casters" in npz.files else None
-            return cls(int(meta["frame_start"]), npz["radiance"], npz["ao"], transfer, meta, npz["fingerprint"], shadows)
+            return cls(int(meta["frame_start"]), npz["radiance"], npz["ao"], transfer, meta, npz["fingerprint"],
+                       shadows)
 
 
 # ---------------------------------------------------------------------------------------
