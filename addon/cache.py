@@ -41,7 +41,7 @@ import numpy as np
 import bpy
 from bpy.app.handlers import persistent
 
-from . import mesh_io, staleness
+from . import casters, mesh_io, staleness
 
 __all__ = [
     "BakeCache", "DEFAULT_DIRECTORY", "HANDLERS", "apply_cached", "baking", "cache_path", "check_directory", "clear",
@@ -66,6 +66,7 @@ class BakeCache:
     transfer: np.ndarray | None     # (F, V, K) float16, or None when not stored
     meta: dict = field(default_factory=dict)   # signature, settings, inputs, lighting, object, token, version
     fingerprint: np.ndarray | None = None      # (F, R, 3) float64 (staleness.fingerprint per frame)
+    casters: np.ndarray | None = None          # (F, C, 3) float64 (casters.fingerprint per frame), or None
 
     @property
     def frame_end(self) -> int:
@@ -76,7 +77,7 @@ class BakeCache:
 
     def to_bytes(self) -> bytes:
         arrays = dict(radiance=self.radiance, ao=self.ao, meta=np.array(json.dumps(self.meta)))
-        for name in ("transfer", "fingerprint"):
+        for name in ("transfer", "fingerprint", "casters"):
             if getattr(self, name) is not None:
                 arrays[name] = getattr(self, name)
         buffer = io.BytesIO()
@@ -90,7 +91,9 @@ class BakeCache:
             if meta.get("version") != VERSION:
                 raise ValueError(f"cache version {meta.get('version')} is not {VERSION}: bake again")
             transfer = npz["transfer"] if "transfer" in npz.files else None
-            return cls(int(meta["frame_start"]), npz["radiance"], npz["ao"], transfer, meta, npz["fingerprint"])
+            shadows = npz["casters"] if "casters" in npz.files else None
+            return cls(int(meta["frame_start"]), npz["radiance"], npz["ao"], transfer, meta, npz["fingerprint"],
+                       shadows)
 
 
 # ---------------------------------------------------------------------------------------
@@ -283,6 +286,8 @@ def _why_invalid(obj, scene, frame: int, cache: BakeCache | None, depsgraph=None
         return "the mesh was edited since the bake"
     if cache.meta.get("settings") != transfer_settings(obj):
         return "the object's settings changed since the bake"
+    if cache.meta.get("casters") != casters.describe(obj, scene):
+        return "the object's shadow casters changed since the bake"
     stale = _stale_reason(obj, scene, frame, cache, depsgraph, recheck)
     if stale is not None:
         return f"the bake cache is stale: {stale}"
@@ -353,10 +358,12 @@ def _positions_differ(obj, scene, cache: BakeCache, frame: int, depsgraph) -> st
     if vertices is None:
         return f"the evaluated mesh at frame {frame} has fewer vertices than the object's mesh"
     current = staleness.fingerprint(vertices, _eye(obj, scene))
-    if staleness.fingerprint_mismatch(cache.fingerprint[frame - cache.frame_start], current) is None:
-        return None
-    return (f"the evaluated positions at frame {frame} are not the bake's (animation, modifiers, simulation "
-            "or placement changed)")
+    if staleness.fingerprint_mismatch(cache.fingerprint[frame - cache.frame_start], current) is not None:
+        return (f"the evaluated positions at frame {frame} are not the bake's (animation, modifiers, simulation "
+                "or placement changed)")
+    stored = None if cache.casters is None else cache.casters[frame - cache.frame_start]
+    moved = casters.fingerprint_mismatch(stored, casters.fingerprint(obj, scene, depsgraph))
+    return None if moved is None else f"at frame {frame} {moved}"
 
 
 def _mark(obj, table: dict, token: tuple, reason: str) -> None:

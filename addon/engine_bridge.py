@@ -7,7 +7,9 @@ or albedo only re-shades (a matrix product), and a depsgraph update that did not
 vertex (for instance the one our own attribute writes cause) computes nothing.
 
 Which objects are computed (one per shared mesh; not curves or text; instances) is decided
-in objects.py; every error message starts with the object's name (`named_errors`).
+in objects.py; every error message starts with the object's name (`named_errors`). An
+object with shadow casters (casters.py) is solved with them: the state of its casters is
+part of what makes a result current.
 
 Time is split into Blender I/O (reading the evaluated mesh, writing attributes) and engine
 time (transfer, shading), per object, in `last_timings`.
@@ -21,6 +23,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from . import casters as shadow_casters
 from . import mesh_io
 from . import objects as scope
 
@@ -44,6 +47,7 @@ class Result:
     radiance: np.ndarray
     io_seconds: float = 0.0
     engine_seconds: float = 0.0
+    note: str = ""  # for the status line: the casters used
 
 
 # Keyed by ID.session_uid: stable while the object lives, unlike its name.
@@ -115,6 +119,7 @@ class Request:
     frame: mesh_io.Frame | None = None  # `vertices` and `view` are in it
     placement: tuple | None = None  # where the frame is in the world (see read_object)
     solved: np.ndarray | None = None  # the transfer of these positions, known already: nothing to solve
+    casters: shadow_casters.Use | None = None  # the other objects shadowing this one, held until solved
 
 
 #: ID.session_uid -> seconds of the object's last solve (jobs.py tells heavy objects by it).
@@ -135,7 +140,9 @@ def read_object(obj, depsgraph, scene, *, force=False):
     t1 = time.perf_counter()
     with named_errors(obj):
         entry = _solver_for(obj, vertices, triangles, frame.matrix)
-    fingerprint = hash((vertices.tobytes(), None if view is None else view.tobytes()))
+        casters = shadow_casters.for_object(obj, scene, depsgraph)
+    fingerprint = hash((vertices.tobytes(), None if view is None else view.tobytes(),
+                        None if casters is None else casters.key(frame)))
     # Where the frame is in the world: turning changes the transfer, moving the lamps' light.
     placement = None if frame.rotation is None else (frame.rotation.tobytes(), frame.offset.tobytes())
     solved = entry.solved is not None and entry.fingerprint == fingerprint
@@ -145,7 +152,7 @@ def read_object(obj, depsgraph, scene, *, force=False):
         return None
     return Request(obj.session_uid, entry, vertices, normals, view, fingerprint, t1 - t0, next(_serials),
                    name=obj.name, frame=frame, placement=placement,
-                   solved=entry.solved if solved and not force else None)
+                   solved=entry.solved if solved and not force else None, casters=casters)
 
 
 def solve_object(request, progress=None):
@@ -154,9 +161,13 @@ def solve_object(request, progress=None):
     `to_world_transfer`. A rigid motion of the object needs no solve."""
     if request.solved is not None:
         return request.solved
+    casters = {} if request.casters is None else request.casters.solve_arguments(request.frame)
     with request.entry.lock, _named(request.name):
         t0 = time.perf_counter()
-        transfer = request.entry.solver.solve(request.vertices, request.normals, request.view, progress=progress)
+        transfer = request.entry.solver.solve(request.vertices, request.normals, request.view, progress=progress,
+                                              **casters)
+        if request.casters is not None:  # a cancelled request may run again (jobs.finish_all): held till dropped
+            request.casters.release()
         request.solve_seconds = seconds = time.perf_counter() - t0
     # The engine answers a repeated solve of the same positions from a cache in no time:
     # decay rather than forget, so a heavy object does not pass for light after one.
@@ -171,6 +182,7 @@ def _shade_request(obj, scene, request, transfer, lighting):
     entry.transfer, entry.placement = to_world_transfer(transfer, frame.rotation), request.placement
     result = _shade(obj, scene, entry.transfer, lighting, mesh_io.frame_to_world(request.vertices, frame))
     result.io_seconds = request.io_seconds
+    result.note = "" if request.casters is None else request.casters.note()
     result.engine_seconds = request.solve_seconds + time.perf_counter() - t0
     return result
 
@@ -315,7 +327,7 @@ def update_object(obj, depsgraph, scene, *, force=False, lighting=None, note="",
 def _publish(obj, result, note=""):
     result.io_seconds += _write(obj, result)
     last_timings[obj.name] = (len(result.ao), result.io_seconds, result.engine_seconds)
-    set_status(obj, _summary(obj, result) + note)
+    set_status(obj, _summary(obj, result) + result.note + note)
 
 
 def enabled_objects(scene):
@@ -369,6 +381,12 @@ def update_scene(scene, depsgraph, objects=None, *, force=False, progress=None):
         if obj.name in errors:
             set_status(obj, errors[obj.name])
     shared = scope.shared_users(scene, computed)
+    with shadow_casters.one_pass():  # each casters collection is brought to this frame once
+        _update_each(scene, depsgraph, computed, shared, errors, force=force, progress=progress)
+    return errors
+
+
+def _update_each(scene, depsgraph, computed, shared, errors, *, force, progress):
     lighting = {}
     for i, obj in enumerate(computed):
         share = None if progress is None else (lambda f, i=i: progress((i + f) / len(computed)))
@@ -383,7 +401,6 @@ def update_scene(scene, depsgraph, objects=None, *, force=False, progress=None):
             errors[obj.name] = str(error)
             set_status(obj, str(error))
         _mark_followers(obj, shared)
-    return errors
 
 
 def compute_now(scene, depsgraph, objects=None):
@@ -445,6 +462,7 @@ def forget(obj=None):
     if obj is None:
         _entries.clear()
         _positions.clear()
+        shadow_casters.forget()
     else:
         _entries.pop(obj.session_uid, None)
         _positions.pop(obj.session_uid, None)

@@ -25,7 +25,7 @@ waits for the jobs first, and computes synchronously from render_init to its end
 import bpy
 from bpy.app.handlers import persistent
 
-from . import cache, engine_bridge, evaluated, jobs, lighting, world_render
+from . import cache, casters, engine_bridge, evaluated, jobs, lighting, world_render
 
 _busy = False
 #: scene name -> lighting.fingerprint the objects were last shaded with.
@@ -103,10 +103,13 @@ def on_frame_change(scene, depsgraph):
 
 
 def _deformed_objects(scene, depsgraph):
-    """Enabled objects the update re-evaluated geometrically (poses, shape keys, edits)."""
+    """Enabled objects the update re-evaluated geometrically (poses, shape keys, edits), or
+    whose shadow casters it moved."""
     uids = {u.id.original.session_uid for u in depsgraph.updates
             if isinstance(u.id, bpy.types.Object) and u.is_updated_geometry}
-    return [o for o in engine_bridge.enabled_objects(scene) if o.session_uid in uids]
+    enabled = engine_bridge.enabled_objects(scene)
+    touched = {o.session_uid for o in casters.receivers_touched(scene, depsgraph, enabled)}  # their casters moved
+    return [o for o in enabled if o.session_uid in uids or o.session_uid in touched]
 
 
 def _lighting_updated(depsgraph):

@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 
 import bpy
 
-from . import engine_bridge, mesh_io
+from . import casters, engine_bridge, mesh_io
 
 #: An object whose last solve took longer than this computes in the worker when interactive.
 HEAVY_SECONDS = 0.1
@@ -125,14 +125,15 @@ def update_scene(scene, depsgraph, objects=None, *, interactive=False, force=Fal
     if queued and keep_running is None:
         keep_running = playing()
     errors = {}
-    for obj in queued:
-        try:
-            request(obj, depsgraph, scene, force=force, keep_running=keep_running)
-        except (ValueError, RuntimeError) as error:
-            engine_bridge.set_status(obj, str(error))
-            errors[obj.name] = str(error)
-    drop(now, scene.frame_current)
-    errors.update(engine_bridge.update_scene(scene, depsgraph, now, force=force))  # also prunes the dead
+    with casters.one_pass():  # queued and computed objects see the same casters
+        for obj in queued:
+            try:
+                request(obj, depsgraph, scene, force=force, keep_running=keep_running)
+            except (ValueError, RuntimeError) as error:
+                engine_bridge.set_status(obj, str(error))
+                errors[obj.name] = str(error)
+        drop(now, scene.frame_current)
+        errors.update(engine_bridge.update_scene(scene, depsgraph, now, force=force))  # also prunes the dead
     return errors
 
 

@@ -28,6 +28,7 @@ def draw_object_settings(layout, obj, scene):
         column.prop(settings, "exponent")
     column.prop(settings, "bands")
     column.prop(settings, "albedo")
+    column.prop(settings, "casters")
     outputs = column.column(heading="Outputs", align=True)
     outputs.label(text="Radiance: hemishadow_radiance", icon="COLOR")
     ao = outputs.row()
@@ -70,6 +71,7 @@ class HEMISHADOW_PT_lighting(_Sidebar, bpy.types.Panel):
         layout.prop(settings, "intensity")
         layout.prop(settings, "rotation")
         layout.prop(settings, "use_sun_lamps")
+        layout.prop(settings, "casters")
         from . import world
 
         layout.label(text=world.lighting_source(context.scene).label, icon="WORLD")

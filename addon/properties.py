@@ -13,6 +13,7 @@ What `world.scene_lighting(scene, bands)` reads from `scene.hemishadow`
   World's own Mapping rotation.
 - `use_sun_lamps`: add the scene's sun lamps as soft SH lobes (point, spot and area lamps
   are always added, per vertex: lamps.py).
+- `casters`: the default "Shadow casters" collection (casters.py) of objects without their own.
 Changing any of these re-shades the objects from their last transfer vectors
 (`engine_bridge.reshade_scene`), without recomputing transfer.
 
@@ -33,6 +34,13 @@ def _shading_changed(self, context):
     from . import engine_bridge
 
     engine_bridge.reshade_object(self.id_data, context.scene)
+
+
+def _casters_changed(self, context):
+    if context.scene.hemishadow.live:
+        from . import engine_bridge
+
+        engine_bridge.update_scene(context.scene, context.evaluated_depsgraph_get())
 
 
 def _live_changed(self, context):
@@ -82,6 +90,9 @@ class HemishadowSceneSettings(bpy.types.PropertyGroup):
                             description="Rotation of the lighting about the world Z axis")
     use_sun_lamps: BoolProperty(name="Sun Lamps", default=True, update=_lighting_changed,
                                 description="Add the scene's sun lamps as soft lobes of their angular diameter")
+    casters: PointerProperty(name="Shadow Casters", type=bpy.types.Collection, update=_casters_changed,
+                             description="Objects that shadow every enabled object without casters of its own "
+                                         "(empty: self-shadowing only)")
 
 
 class HemishadowObjectSettings(bpy.types.PropertyGroup):
@@ -104,6 +115,9 @@ class HemishadowObjectSettings(bpy.types.PropertyGroup):
                            description="Write the float point attribute hemishadow_ao")
     write_sh: BoolProperty(name="SH Transfer Layers", default=False,
                            description="Write the transfer coefficients as float point attributes hemishadow_sh_00, ...")
+    casters: PointerProperty(name="Shadow Casters", type=bpy.types.Collection, update=_casters_changed,
+                             description="Objects that shadow this one, besides itself (empty: the scene's "
+                                         "Shadow Casters)")
     status: StringProperty(name="Status", default="", description="Outcome of the last computation")
 
     @property

@@ -70,6 +70,11 @@ def _signs(count: int) -> np.ndarray:
     return rng.integers(0, 2, (_SUMS, count)).astype(np.float64) * 2.0 - 1.0
 
 
+def random_signs(count: int) -> np.ndarray:
+    """(8, count) of +-1, the same for the same count: sums that any one changed row shows in."""
+    return _signs(count)
+
+
 def fingerprint(vertices: np.ndarray, eye=None) -> np.ndarray:
     """(_SUMS + 2 [+ 1], 3) float64: random-sign sums of the positions, their minimum and
     maximum, and the camera position when the shading depends on it (Phong)."""

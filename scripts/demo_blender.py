@@ -1,12 +1,14 @@
-"""The Blender demo: cloth falling onto Suzanne, lit by a Blender HDRI, self-shadowed live,
-through the installed extension.
+"""The Blender demo: cloth falling onto Suzanne over a floor, lit by a Blender HDRI, shadowed
+live (each by itself and by the others), through the installed extension.
 
     .venv/bin/python scripts/build_extension.py --if-stale   # dist/hemishadow-0.1.0-linux_x64.zip
     .venv/bin/python scripts/demo_blender.py                  # or: make demo (does both)
 
 Like Figure 1 of Kautz et al. 2004: a cloth simulation (a subdivided plane of 1,444 vertices
 with a Cloth modifier) drops onto an obstacle (Suzanne, smooth, with a Subdivision Surface
-modifier: hemishadow computes on its 507 original vertices and the modifier interpolates).
+modifier: hemishadow computes on its 507 original vertices and the modifier interpolates),
+over a subdivided floor. Cloth, Suzanne and the floor are the scene's "Shadow casters"
+collection: the cloth darkens Suzanne's head, and both darken the floor.
 The script
 0. installs the extension zip into the project's `bpy` module the way a user does
    (`bpy.ops.extensions.package_install_files`, enabled on install) into a project-local user
@@ -16,7 +18,8 @@ The script
    wheels, not from this environment;
 1. builds the scene and bakes the cloth simulation's point cache;
 2. lights it with the World's Environment Texture = Blender's "forest" HDRI;
-3. enables hemishadow on both objects, adds the one-click material
+3. enables hemishadow on the three objects, makes them the scene's shadow casters
+   (`scene.hemishadow.casters`; `--no-casters`: self-shadowing only), adds the one-click material
    (`bpy.ops.hemishadow.add_material`), turns Live on (`bpy.ops.hemishadow.live_toggle`);
 4. steps the frames with `scene.frame_set` (the live handlers compute every frame) and prints
    per-frame times: engine (transfer + shading) and Blender I/O (reading the evaluated mesh,
@@ -61,6 +64,11 @@ def parse_args(argv=None):
     parser.add_argument("--samples", type=int, default=16, help="Cycles samples (default 16)")
     parser.add_argument("--grid", type=int, default=38, help="cloth vertices per side (default 38: 1,444)")
     parser.add_argument("--hdri", default="forest", help="one of Blender's built-in HDRIs (default forest)")
+    parser.add_argument("--no-casters", action="store_true",
+                        help="self-shadowing only: no 'Shadow casters' collection (to compare the per-frame times)")
+    parser.add_argument("--source", action="store_true",
+                        help="register the add-on of this checkout with the environment's engine instead of "
+                             "installing the zip (to measure changes before they are packaged)")
     return parser.parse_args(argv)
 
 
@@ -124,8 +132,8 @@ def build_scene(grid: int, frames: int, hdri: str):
     scene.frame_start, scene.frame_end = 1, frames
     scene.render.fps = 24
 
-    # Floor: catches the cloth's edges.
-    bpy.ops.mesh.primitive_plane_add(size=8, location=(0, 0, 0))
+    # Floor: catches the cloth's edges; subdivided, so that its vertices can show the shadows.
+    bpy.ops.mesh.primitive_grid_add(x_subdivisions=40, y_subdivisions=40, size=8, location=(0, 0, 0))
     floor = bpy.context.object
     floor.name = "Floor"
     floor.modifiers.new("Collision", "COLLISION")
@@ -227,16 +235,16 @@ def demo_material(obj):
         bpy.ops.hemishadow.add_material(mode="EMIT")
 
 
-def floor_material(floor):
+def shadow_casters(scene, objects):
+    """A "Shadow casters" collection holding `objects` (linked, not moved), the scene's default."""
     import bpy
 
-    material = bpy.data.materials.new("Floor")
-    if material.node_tree is None:
-        material.use_nodes = True
-    principled = material.node_tree.nodes["Principled BSDF"]
-    principled.inputs["Base Color"].default_value = (0.30, 0.29, 0.27, 1.0)
-    principled.inputs["Roughness"].default_value = 0.9
-    floor.data.materials.append(material)
+    collection = bpy.data.collections.new("Shadow casters")
+    scene.collection.children.link(collection)
+    for obj in objects:
+        collection.objects.link(obj)
+    scene.hemishadow.casters = collection
+    return collection
 
 
 # -- the run -----------------------------------------------------------------------------------
@@ -292,9 +300,18 @@ def main(argv=None):
 
     import bpy
 
-    addon = install_extension(args.zip, site)
-    engine_bridge = sys.modules[MODULE + ".engine_bridge"]
-    bake = sys.modules[MODULE + ".operators.bake"]
+    module = "addon" if args.source else MODULE
+    if args.source:
+        sys.path.insert(0, str(ROOT))
+        import addon
+        import hemishadow
+
+        addon.register()
+        print(f"add-on from {ROOT / 'addon'} (not installed), engine from {pathlib.Path(hemishadow.__file__).parent}")
+    else:
+        install_extension(args.zip, site)
+    engine_bridge = sys.modules[module + ".engine_bridge"]
+    bake = sys.modules[module + ".operators.bake"]
 
     scene, cloth, suzanne, floor = build_scene(args.grid, args.frames, args.hdri)
     blend = out / "demo.blend"
@@ -303,16 +320,17 @@ def main(argv=None):
           f"frames {scene.frame_start}..{scene.frame_end}, lighting: Blender's '{args.hdri}' HDRI")
     print(f"cloth simulation baked in {bake_cloth(scene, cloth):.1f} s")
 
-    objects = [cloth, suzanne]
-    for obj, albedo in ((cloth, (0.80, 0.30, 0.22)), (suzanne, (0.80, 0.72, 0.55))):
+    objects = [cloth, suzanne, floor]
+    for obj, albedo in ((cloth, (0.80, 0.30, 0.22)), (suzanne, (0.80, 0.72, 0.55)), (floor, (0.42, 0.40, 0.37))):
         obj.hemishadow.enabled = True
         obj.hemishadow.albedo = albedo
+        demo_material(obj)
     scene.hemishadow.lighting_source = "WORLD"
-    demo_material(cloth)
-    demo_material(suzanne)
-    floor_material(floor)
+    if not args.no_casters:
+        shadow_casters(scene, objects)
 
-    print("live self-shadowing (scene.frame_set, handlers on):")
+    print("live shadowing (scene.frame_set, handlers on), shadow casters: "
+          + ("none (self-shadowing only)" if args.no_casters else "cloth, Suzanne and floor") + ":")
     scene.frame_set(scene.frame_start)
     engine_bridge.last_timings.clear()
     bpy.ops.hemishadow.live_toggle()   # switched on: computes the enabled objects at once

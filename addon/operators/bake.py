@@ -18,7 +18,7 @@ import numpy as np
 
 import bpy
 
-from .. import cache, engine_bridge, lamps, mesh_io, staleness, world_render
+from .. import cache, casters, engine_bridge, lamps, mesh_io, staleness, world_render
 
 __all__ = ["BakeJob", "BakeResult", "bake_range", "HEMISHADOW_OT_bake_animation", "HEMISHADOW_OT_clear_bake", "classes"]
 
@@ -76,6 +76,7 @@ class BakeJob:
         self._pending: list[tuple[int, Future]] = []
         self._frames: dict[str, dict[int, tuple]] = {obj.name: {} for obj in self.objects}
         self._fingerprints: dict[str, dict[int, np.ndarray]] = {obj.name: {} for obj in self.objects}
+        self._casters: dict[str, dict[int, np.ndarray | None]] = {obj.name: {} for obj in self.objects}
         self._meta = {obj.name: self._object_meta(obj) for obj in self.objects}
         self._solvers = {}
         # An animated World is rendered for every frame now: the frame handlers cannot.
@@ -132,13 +133,17 @@ class BakeJob:
         view = engine_bridge._view_directions(obj, self.scene, vertices, frame)   # None for diffuse
         self._fingerprints[obj.name][self.scene.frame_current] = staleness.fingerprint(
             mesh_io.frame_to_world(vertices, frame), cache._eye(obj, self.scene))
+        self._casters[obj.name][self.scene.frame_current] = casters.fingerprint(obj, self.scene, depsgraph)
         frame_lamps = self._lamps[self.scene.frame_current][0]
-        return FrameInput(solver, vertices, normals, view, lighting, albedo, frame_lamps, frame)
+        with engine_bridge.named_errors(obj):
+            shadows = casters.for_object(obj, self.scene, depsgraph)   # held until the worker solved it
+        return FrameInput(solver, vertices, normals, view, lighting, albedo, frame_lamps, frame, shadows)
 
     def _object_meta(self, obj) -> dict:
         return dict(version=cache.VERSION, object=obj.name, frame_start=self.frame_start,
                     signature=cache.signature(obj), rest=cache.rest_signature(obj),
-                    settings=cache.transfer_settings(obj), inputs=staleness.inputs(obj, self.scene))
+                    settings=cache.transfer_settings(obj), inputs=staleness.inputs(obj, self.scene),
+                    casters=casters.describe(obj, self.scene))
 
     # -- the steps --------------------------------------------------------------------------
 
@@ -165,7 +170,8 @@ class BakeJob:
         depsgraph = bpy.context.evaluated_depsgraph_get()
         found = lamps.scene_lamps(self.scene)
         self._lamps[frame] = (found, lamps.lamps_key(self.scene))
-        inputs = [self._frame_input(obj, depsgraph) for obj in self.objects]
+        with casters.one_pass():
+            inputs = [self._frame_input(obj, depsgraph) for obj in self.objects]
         self.result.blender_seconds += time.perf_counter() - t0
         self._pending.append((frame, self._executor.submit(_compute_frame, inputs, self.store_transfer,
                                                            self._engine_progress)))
@@ -230,25 +236,32 @@ class BakeJob:
         meta["albedo"] = np.asarray(first[4], np.float32).tolist()
         meta["lamps"] = self._lamps[self.frame_start][1]
         fingerprint = np.stack([self._fingerprints[obj.name][f] for f in order])
-        return cache.BakeCache(self.frame_start, radiance, ao, transfer, meta, fingerprint)
+        shadows = [self._casters[obj.name][f] for f in order]
+        shadows = None if shadows[0] is None else np.stack(shadows)   # the same collection on every frame
+        return cache.BakeCache(self.frame_start, radiance, ao, transfer, meta, fingerprint, shadows)
 
 
 class FrameInput:
     """One object's arrays for one frame, and the solver that turns them into transfer."""
 
-    __slots__ = ("solver", "vertices", "normals", "view", "lighting", "albedo", "lamps", "frame")
+    __slots__ = ("solver", "vertices", "normals", "view", "lighting", "albedo", "lamps", "frame", "casters")
 
-    def __init__(self, solver, vertices, normals, view, lighting, albedo, lamps=(), frame=None):
-        """`vertices` (and `view`) in the object's frame (mesh_io.read_in_frame)."""
+    def __init__(self, solver, vertices, normals, view, lighting, albedo, lamps=(), frame=None, casters=None):
+        """`vertices` (and `view`) in the object's frame (mesh_io.read_in_frame); `casters` a
+        casters.Use (None: self-shadowing only)."""
         self.solver, self.vertices, self.normals, self.view = solver, vertices, normals, view
         self.lighting, self.albedo, self.lamps, self.frame = lighting, albedo, lamps, frame
+        self.casters = casters
 
     def compute(self, progress=None):
         """Worker thread: (transfer (V, K), radiance (V, 3), ao (V,)). `progress` is the engine's
         (a False return stops it with hemishadow.Cancelled)."""
         import hemishadow
 
-        solved = self.solver.solve(self.vertices, self.normals, view=self.view, progress=progress)
+        shadows = {} if self.casters is None else self.casters.solve_arguments(self.frame)
+        solved = self.solver.solve(self.vertices, self.normals, view=self.view, progress=progress, **shadows)
+        if self.casters is not None:
+            self.casters.release()   # else when the input is dropped
         transfer = engine_bridge.to_world_transfer(solved, self.frame.rotation)
         radiance = hemishadow.shade(transfer, self.lighting, self.albedo)
         if self.lamps:   # numpy only: safe in the worker

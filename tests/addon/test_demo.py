@@ -40,9 +40,12 @@ def test_reduced_demo_uses_the_installed_extension(zip_path, tmp_path):
     site = user / "extensions" / ".local" / "lib" / f"python{sys.version_info.major}.{sys.version_info.minor}"
     assert f"{MODULE} enabled" in output, output
     assert f"engine from {site}" in output, output
-    for name in ("Cloth", "Suzanne"):
+    for name in ("Cloth", "Suzanne", "Floor"):
         assert f"attributes of {name}: hemishadow_ao, hemishadow_radiance" in output, output
+    assert "shadow casters: cloth, Suzanne and floor" in output, output
     assert "Cloth: 1444 vertices, computed on 2 frames" in output, output   # frames 2 and 3, live
+    # Static, but shadowed by the falling cloth: computed again on every frame.
+    assert "Suzanne: 507 vertices, computed on 2 frames" in output, output
     assert (out / "demo.blend").is_file()
-    assert {p.name for p in (out / "hemishadow_cache").iterdir()} == {"Cloth.npz", "Suzanne.npz"}
+    assert {p.name for p in (out / "hemishadow_cache").iterdir()} == {"Cloth.npz", "Suzanne.npz", "Floor.npz"}
     assert not list(out.glob("*.png"))
