@@ -168,3 +168,26 @@ def test_bad_casters_input():
         solver.solve(pv, casters=scene, to_world=nan)
     empty = hemishadow.Scene()
     np.testing.assert_array_equal(solver.solve(pv, casters=empty), solver.solve(pv))
+
+
+def test_still_casters_are_not_rasterized_again():
+    """A still ball (320 triangles) and a moving box (12) over a still plane: every frame
+    equals a fresh solve bit for bit, and once the box is known to move only it is
+    rasterized again; when the ball moves too, everything is recomputed and still exact."""
+    (pv, pt), (bv, bt) = plane_and_box()
+    ball = trimesh.creation.icosphere(subdivisions=2, radius=0.2)
+    scene, (box, sphere) = scene_of((bv, bt), (np.asarray(ball.vertices), np.asarray(ball.faces)))
+    solver = hemishadow.TransferSolver(pv, pt)
+    fresh = hemishadow.TransferSolver(pv, pt, reuse=False)
+    counts = []
+    for frame, (box_x, x) in enumerate([(-0.5, 0.0), (-0.3, 0.0), (0.0, 0.0), (0.3, 0.0), (0.3, -0.4), (0.5, -0.4)]):
+        m, b = np.eye(4), np.eye(4)
+        m[:3, 3] = (x, 0.3, 0.35)
+        b[0, 3] = box_x
+        scene.set_matrix(sphere, m)
+        scene.set_matrix(box, b)
+        np.testing.assert_array_equal(solver.solve(pv, casters=scene), fresh.solve(pv, casters=scene), err_msg=f"frame {frame}")
+        counts.append((solver.stats["blockers_per_vertex"], fresh.stats["blockers_per_vertex"]))
+    # Frames 0-1 learn which caster moves; 2-3 rasterize only the box; 4 (the ball moved) all.
+    assert counts[2][0] < 0.2 * counts[2][1] and counts[3][0] < 0.2 * counts[3][1], counts
+    assert counts[4][0] == counts[4][1], counts

@@ -6,6 +6,7 @@
 //! (`rasterizer`, `plane_table`, `disk_mask`) -> integration against SH and the BRDF
 //! (`integrate`, `sh`) -> transfer vector (`transfer`). Lighting comes from `environment`.
 
+pub mod caster_reuse;
 pub mod disk_mask;
 pub mod environment;
 pub mod error;

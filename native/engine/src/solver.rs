@@ -7,7 +7,7 @@
 //! blockers did not move.
 
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 
 use rayon::prelude::*;
 
@@ -21,7 +21,8 @@ use crate::pvs::{contributing, Pvs};
 use crate::plane_table::PlaneTable;
 use crate::packets::{PacketLists, LANES};
 use crate::rasterizer::Pipeline;
-use crate::scene::casters::{Casters, CastersKey};
+use crate::caster_reuse::{CasterCache, CasterPlan};
+use crate::scene::casters::Casters;
 use crate::sh::ShBasis;
 use crate::transfer::{check_brdf, checked_downsample, checked_offset, welded_views, Receiver, Settings, View};
 
@@ -69,7 +70,7 @@ struct LastFrame {
     views: Option<Vec<Vec3>>,
     group_bounds: Vec<[Vec3; 2]>,
     used_pvs: bool,
-    casters: Option<CastersKey>,
+    casters: Option<CasterCache>,
     transfer: Vec<f32>,
 }
 
@@ -173,6 +174,7 @@ impl Solver {
             (l.positions.len() + l.normals.len() + l.views.as_ref().map_or(0, Vec::len)) * size_of::<Vec3>()
                 + l.group_bounds.len() * 24
                 + l.transfer.len() * 4
+                + l.casters.as_ref().map_or(0, CasterCache::bytes)
         });
         (self.remap.len() + self.first_copy.len()) * 4
             + self.fine.len() * 12
@@ -204,7 +206,8 @@ impl Solver {
     }
 
     /// `solve_with_progress` with a scene's blockers (`casters`) rasterized into each
-    /// receiver's mask after the mesh's own: shadows cast by other objects.
+    /// receiver's mask after the mesh's own: shadows cast by other objects. Receivers whose
+    /// own blockers kept still rasterize only the casters that moved (`caster_reuse`).
     pub fn solve_with_casters(
         &mut self,
         vertices: &[Vec3],
@@ -214,19 +217,33 @@ impl Solver {
         progress: Progress,
     ) -> Result<Vec<f32>> {
         let frame = self.prepare(vertices, normals, view)?;
-        let casters_key = casters.map(|c| c.key().clone());
-        let reusable = self.reusable_receivers(&frame, &casters_key);
+        let still = self.reusable_receivers(&frame, casters.is_some());
+        let cache = self.last.as_ref().and_then(|l| l.casters.as_ref());
+        let plan = casters.map(|c| CasterPlan::new(cache, c));
+        let keep_masks = casters.is_some() && self.blockers.reuse;
+        let masks: Vec<Mutex<Mask>> = (0..if keep_masks { frame.positions.len() } else { 0 }).map(|_| Mutex::new(Mask::EMPTY)).collect();
         let k = self.coeffs();
         let mut welded = vec![0.0f32; frame.positions.len() * k];
-        let blockers = AtomicU64::new(0);
-        let reused = reusable.iter().filter(|&&r| r).count();
-        par_rows(&mut welded, k, progress, Vec::new, |r, scratch, out| match (&self.last, reusable[r]) {
-            (Some(last), true) => out.copy_from_slice(&last.transfer[r * k..(r + 1) * k]),
-            _ => {
-                let count = self.receiver(r, &frame, casters, scratch, out);
-                blockers.fetch_add(count, Ordering::Relaxed);
+        let (blockers, reused) = (AtomicU64::new(0), AtomicU64::new(0));
+        par_rows(&mut welded, k, progress, Vec::new, |r, scratch, out| {
+            let copy = still[r] && plan.as_ref().is_none_or(|p| p.unchanged);
+            let step = match (&self.last, copy) {
+                (Some(last), true) => {
+                    out.copy_from_slice(&last.transfer[r * k..(r + 1) * k]);
+                    reused.fetch_add(1, Ordering::Relaxed);
+                    Step { base: cache.map(|c| c.masks[r]), count: 0 }
+                }
+                _ => {
+                    let cached = cache.filter(|_| still[r] && plan.as_ref().is_some_and(|p| p.masks_valid)).map(|c| c.masks[r]);
+                    self.receiver(r, &frame, casters.zip(plan.as_ref()), cached, scratch, out)
+                }
+            };
+            blockers.fetch_add(step.count, Ordering::Relaxed);
+            if let (Some(slot), Some(base)) = (masks.get(r), step.base) {
+                *slot.lock().unwrap_or_else(|e| e.into_inner()) = base;
             }
         })?;
+        let reused = reused.into_inner() as usize;
         let computed = frame.positions.len() - reused;
         self.stats = Stats {
             blockers_per_receiver: blockers.into_inner() as f64 / computed.max(1) as f64,
@@ -236,8 +253,10 @@ impl Solver {
         };
         let result = self.remap.iter().flat_map(|&w| welded[w as usize * k..(w as usize + 1) * k].iter().copied()).collect();
         if self.blockers.reuse {
+            let masks = masks.into_iter().map(|m| m.into_inner().unwrap_or_else(|e| e.into_inner())).collect();
+            let casters = casters.zip(plan).map(|(c, p)| p.into_cache(c, masks));
             let Frame { positions, normals, views, group_bounds, use_pvs, .. } = frame;
-            self.last = Some(LastFrame { positions, normals, views, group_bounds, used_pvs: use_pvs, casters: casters_key, transfer: welded });
+            self.last = Some(LastFrame { positions, normals, views, group_bounds, used_pvs: use_pvs, casters, transfer: welded });
         }
         Ok(result)
     }
@@ -393,10 +412,12 @@ impl Solver {
     /// Receivers whose result cannot differ from the last frame's: same position, normal and
     /// view, and every group of blockers that moved lies below its horizon in both frames
     /// (so it contributed nothing then and contributes nothing now).
-    fn reusable_receivers(&self, frame: &Frame, casters: &Option<CastersKey>) -> Vec<bool> {
+    /// `casters`: whether this frame has casters; a last frame with (or without) them leaves
+    /// nothing to reuse for a frame without (or with): the masks differ.
+    fn reusable_receivers(&self, frame: &Frame, casters: bool) -> Vec<bool> {
         let n = frame.positions.len();
         let Some(last) = self.last.as_ref().filter(|_| self.blockers.reuse) else { return vec![false; n] };
-        if last.views != frame.views || last.used_pvs != frame.use_pvs || &last.casters != casters {
+        if last.views != frame.views || last.used_pvs != frame.use_pvs || last.casters.is_some() != casters {
             return vec![false; n];
         }
         let moved: Vec<bool> = (0..n).map(|v| frame.positions[v] != last.positions[v] || frame.normals[v] != last.normals[v]).collect();
@@ -423,33 +444,56 @@ impl Solver {
             .collect()
     }
 
-    /// Transfer of welded receiver `r` into `out`; returns the number of blockers rasterized.
-    /// The hot loop is compiled twice, for AVX2 + FMA and for the baseline, and picked at run time.
-    fn receiver(&self, r: usize, frame: &Frame, casters: Option<&Casters>, scratch: &mut Vec<Vec3>, out: &mut [f32]) -> u64 {
+    /// Transfer of welded receiver `r` into `out`: its own blockers (or `cached`, the mask of
+    /// its own and the still casters from the last frame), then the casters per `plan`.
+    fn receiver(&self, r: usize, frame: &Frame, casters: Option<(&Casters, &CasterPlan)>, cached: Option<Mask>, scratch: &mut Vec<Vec3>, out: &mut [f32]) -> Step {
+        let Some(receiver) = Receiver::new(frame.positions[r], frame.normals[r], self.offset) else {
+            out.fill(0.0);
+            return Step { base: Some(Mask::EMPTY), count: 0 };
+        };
+        let table = &*self.table;
+        let (mut mask, mut count) = match cached {
+            Some(mask) => (mask, 0),
+            None => {
+                let (mut mask, mut count) = self.own_mask(r, frame, &receiver);
+                if let Some((c, plan)) = casters.filter(|_| mask != self.disk) {
+                    count += c.occlude(table, &self.normalization, &receiver, &plan.skip_moving, self.disk, &mut mask, scratch);
+                }
+                (mask, count)
+            }
+        };
+        let base = mask;
+        if let Some((c, plan)) = casters.filter(|_| mask != self.disk) {
+            count += c.occlude(table, &self.normalization, &receiver, &plan.skip_still, self.disk, &mut mask, scratch);
+        }
+        let view = frame.views.as_ref().map_or(receiver.frame.n, |v| v[r]);
+        self.quadrature.integrate(&mask, &receiver.frame, self.brdf, view, out);
+        Step { base: Some(base), count }
+    }
+
+    /// The mask of receiver `r`'s own blockers and their count. The hot loop is compiled
+    /// twice, for AVX2 + FMA and for the baseline, and picked at run time.
+    fn own_mask(&self, r: usize, frame: &Frame, receiver: &Receiver) -> (Mask, u64) {
         #[cfg(target_arch = "x86_64")]
         if std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma") {
             // SAFETY: the CPU supports the features the function is compiled for.
-            return unsafe { self.receiver_avx2(r, frame, casters, scratch, out) };
+            return unsafe { self.own_mask_avx2(r, frame, receiver) };
         }
-        self.receiver_portable(r, frame, casters, scratch, out)
+        self.own_mask_portable(r, frame, receiver)
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
-    unsafe fn receiver_avx2(&self, r: usize, frame: &Frame, casters: Option<&Casters>, scratch: &mut Vec<Vec3>, out: &mut [f32]) -> u64 {
-        self.receiver_portable(r, frame, casters, scratch, out)
+    unsafe fn own_mask_avx2(&self, r: usize, frame: &Frame, receiver: &Receiver) -> (Mask, u64) {
+        self.own_mask_portable(r, frame, receiver)
     }
 
     /// Per group of clusters (skipped whole when below the horizon): the coarse triangles of
     /// the clusters seen from afar, then the fine packets of the clusters seen at full
     /// resolution (the receiver's ring and clusters close to it), each packet skipped when
-    /// its box is below the horizon; then the casters' blockers, if any.
+    /// its box is below the horizon.
     #[inline(always)]
-    fn receiver_portable(&self, r: usize, frame: &Frame, casters: Option<&Casters>, scratch: &mut Vec<Vec3>, out: &mut [f32]) -> u64 {
-        let Some(receiver) = Receiver::new(frame.positions[r], frame.normals[r], self.offset) else {
-            out.fill(0.0);
-            return 0;
-        };
+    fn own_mask_portable(&self, r: usize, frame: &Frame, receiver: &Receiver) -> (Mask, u64) {
         let (h, table, origin) = (&self.hierarchy, &*self.table, receiver.origin);
         let mut mask = Mask::EMPTY;
         let mut pipeline = Pipeline::default();
@@ -494,14 +538,15 @@ impl Solver {
             }
         }
         pipeline.drain(table, &mut mask);
-        let mut rasterized = rasterized as u64;
-        if let Some(casters) = casters.filter(|_| mask != self.disk) {
-            rasterized += casters.occlude(table, &self.normalization, &receiver, self.disk, &mut mask, scratch);
-        }
-        let view = frame.views.as_ref().map_or(receiver.frame.n, |v| v[r]);
-        self.quadrature.integrate(&mask, &receiver.frame, self.brdf, view, out);
-        rasterized
+        (mask, rasterized as u64)
     }
+}
+
+/// What computing (or reusing) one receiver left: the mask of its own and the still casters'
+/// blockers (for the next frame), and how many blockers it rasterized.
+struct Step {
+    base: Option<Mask>,
+    count: u64,
 }
 
 /// Normalised positions rounded to a grid of 1/1024: the hierarchy is built from these, so that

@@ -58,12 +58,13 @@ impl Rigid {
     }
 }
 
-/// What decides whether a solver's last result may be reused: equal keys, equal blockers.
+/// How a solver sees the scene, besides its instances' stamps: results under one key differ
+/// only where an instance's stamp changed.
 #[derive(Clone, Debug, PartialEq)]
 pub struct CastersKey {
-    version: u64,
     to_world: Rigid,
     exclude: Vec<u32>,
+    lod: u32,
 }
 
 /// A prepared scene seen by a solver's receivers, minus the excluded instances.
@@ -89,7 +90,7 @@ impl Scene {
         exclude.sort_unstable();
         exclude.dedup();
         let (trees, positions) = self.walk_parts();
-        let key = CastersKey { version: self.version, to_world, exclude };
+        let key = CastersKey { to_world, exclude, lod: self.lod.to_bits() };
         Ok(Casters { trees, positions, scene: self, key })
     }
 }
@@ -99,9 +100,24 @@ impl Casters<'_> {
         &self.key
     }
 
-    /// Rasterizes the scene's blockers of `receiver` (in the solver's normalised space, which
-    /// `normalization` made from the solver's input) into `mask`; returns the triangle count.
-    pub fn occlude(&self, table: &PlaneTable, normalization: &Normalization, receiver: &Receiver, full: Mask, mask: &mut Mask, scratch: &mut Vec<Vec3>) -> u64 {
+    /// Per instance, a stamp that changes whenever its blockers change (unique across scenes).
+    pub fn stamps(&self) -> &[u64] {
+        &self.scene.stamps
+    }
+
+    /// The instances a walk skips: the excluded ones and `also` (ascending).
+    pub fn skipping(&self, also: &[u32]) -> Vec<u32> {
+        let mut skip: Vec<u32> = self.key.exclude.iter().chain(also).copied().collect();
+        skip.sort_unstable();
+        skip.dedup();
+        skip
+    }
+
+    /// Rasterizes the blockers of `receiver` (in the solver's normalised space, which
+    /// `normalization` made from the solver's input) into `mask`, skipping the instances in
+    /// `skip` (ascending, see `skipping`); returns the triangle count.
+    #[allow(clippy::too_many_arguments)]
+    pub fn occlude(&self, table: &PlaneTable, normalization: &Normalization, receiver: &Receiver, skip: &[u32], full: Mask, mask: &mut Mask, scratch: &mut Vec<Vec3>) -> u64 {
         let place = &self.key.to_world;
         let Frame { t, b, n } = receiver.frame;
         let world = Receiver {
@@ -110,7 +126,7 @@ impl Casters<'_> {
         };
         let scene = self.scene;
         let top = scene.top.as_ref().expect("prepared by Scene::casters");
-        let walk = Walk { trees: &self.trees, positions: &self.positions, instances: &scene.instances, top, lod: scene.lod, exclude: &self.key.exclude };
+        let walk = Walk { trees: &self.trees, positions: &self.positions, instances: &scene.instances, top, lod: scene.lod, exclude: skip };
         let mut sink = MaskSink::onto(table, *mask, full);
         walk.run(&world, scratch, &mut sink);
         let (result, triangles) = sink.finish();

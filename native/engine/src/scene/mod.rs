@@ -21,10 +21,10 @@ pub mod traverse;
 
 use std::sync::atomic::{AtomicU64, Ordering};
 
-/// Source of `Scene::version` values, unique across every scene of the process.
+/// Source of instance stamps, unique across every scene of the process.
 static VERSIONS: AtomicU64 = AtomicU64::new(1);
 
-fn next_version() -> u64 {
+fn next_stamp() -> u64 {
     VERSIONS.fetch_add(1, Ordering::Relaxed)
 }
 use std::sync::Arc;
@@ -80,8 +80,8 @@ pub struct Scene {
     lod: f32,
     table_resolution: usize,
     stats: SceneStats,
-    /// Changes with every edit of the geometry, placements or level of detail.
-    version: u64,
+    /// Per instance, a stamp renewed whenever its blockers change (moved, mesh deformed).
+    stamps: Vec<u64>,
 }
 
 impl Default for Scene {
@@ -102,7 +102,7 @@ impl Scene {
             lod: DEFAULT_LOD,
             table_resolution: crate::plane_table::DEFAULT_RESOLUTION,
             stats: SceneStats::default(),
-            version: next_version(),
+            stamps: Vec::new(),
         }
     }
 
@@ -115,7 +115,6 @@ impl Scene {
         if let Some(t) = triangles.iter().find(|t| t.iter().any(|&v| v as usize >= vertices.len())) {
             return Err(Error::invalid(format!("triangle {t:?} uses a vertex beyond the mesh's {} vertices", vertices.len())));
         }
-        self.version = next_version();
         self.meshes.push(SceneMesh { positions: vertices.to_vec(), triangles: triangles.to_vec(), tree: None, moved: false, radiance: None });
         Ok((self.meshes.len() - 1) as u32)
     }
@@ -126,13 +125,13 @@ impl Scene {
         self.mesh_index(mesh)?;
         self.instances.push((mesh, Affine::from_rows(matrix)?));
         self.instance_radiance.push(None);
-        self.version = next_version();
+        self.stamps.push(next_stamp());
         self.top = None;
         Ok((self.instances.len() - 1) as u32)
     }
 
     /// New positions for a mesh that moves (same vertex count and triangles); its hierarchy is
-    /// refitted, not rebuilt, and nothing else is touched.
+    /// refitted, not rebuilt, and nothing else is touched. The same positions change nothing.
     pub fn set_vertices(&mut self, mesh: u32, vertices: &[Vec3]) -> Result<()> {
         let m = self.mesh_index(mesh)?;
         let count = self.meshes[m].positions.len();
@@ -140,18 +139,28 @@ impl Scene {
             return Err(Error::invalid(format!("mesh {mesh} has {count} vertices, got {}: add a new mesh to change topology", vertices.len())));
         }
         check_finite(vertices, "vertex")?;
+        if self.meshes[m].positions == vertices {
+            return Ok(());
+        }
         self.meshes[m].positions.copy_from_slice(vertices);
         self.meshes[m].moved = true;
         self.refit_top = true;
-        self.version = next_version();
+        for (stamp, _) in self.stamps.iter_mut().zip(&self.instances).filter(|(_, (im, _))| *im as usize == m) {
+            *stamp = next_stamp();
+        }
         Ok(())
     }
 
+    /// A new world matrix for an instance; the same matrix changes nothing.
     pub fn set_matrix(&mut self, instance: u32, matrix: &[f64; 16]) -> Result<()> {
         let i = self.instance_index(instance)?;
-        self.instances[i].1 = Affine::from_rows(matrix)?;
+        let transform = Affine::from_rows(matrix)?;
+        if self.instances[i].1 == transform {
+            return Ok(());
+        }
+        self.instances[i].1 = transform;
         self.refit_top = true;
-        self.version = next_version();
+        self.stamps[i] = next_stamp();
         Ok(())
     }
 
@@ -199,14 +208,7 @@ impl Scene {
             return Err(Error::invalid(format!("lod must be between 0 and 1, got {lod}")));
         }
         self.lod = lod;
-        self.version = next_version();
         Ok(())
-    }
-
-    /// Changes whenever the blockers may have changed (see `casters`: a solver reuses nothing
-    /// across versions).
-    pub fn version(&self) -> u64 {
-        self.version
     }
 
     pub fn lod(&self) -> f32 {
