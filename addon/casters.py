@@ -112,6 +112,17 @@ def _digest(array):
     return hash(array.tobytes())
 
 
+def _faces_digest(mesh):
+    """Of the polygons' corners: the topology. Not of the loop triangles, whose diagonals a
+    bending quad may flip from one frame to the next (the cloth does): that is no new
+    topology, and the scene keeps the triangles it was built with."""
+    corners = np.empty(len(mesh.loops), np.int32)
+    mesh.loops.foreach_get("vertex_index", corners)
+    sizes = np.empty(len(mesh.polygons), np.int32)
+    mesh.polygons.foreach_get("loop_total", sizes)
+    return hash((corners.tobytes(), sizes.tobytes()))
+
+
 # -- one scene of a collection ----------------------------------------------------------------------
 
 @dataclass
@@ -119,7 +130,7 @@ class _Mesh:
     id: int
     counts: tuple            # (vertices, triangles)
     digest: int              # of the positions
-    triangles_digest: int
+    faces_digest: int        # of the polygons (see _faces_digest)
 
 
 @dataclass(eq=False)
@@ -159,9 +170,8 @@ class CasterScene:
             digest = _digest(positions)
             if digest == known.digest:
                 continue
-            # Moved: only then are the triangles read, to tell a deformation from a new topology.
-            triangles = mesh_io.triangles_of(item.mesh)
-            if _digest(triangles) != known.triangles_digest:
+            # Moved: only then are the faces read, to tell a deformation from a new topology.
+            if _faces_digest(item.mesh) != known.faces_digest:
                 return self._build(items)
             self.scene.set_vertices(known.id, positions)
             known.digest, changed = digest, True
@@ -188,7 +198,7 @@ class CasterScene:
                 self.build_notes.append(f"'{item.name[1]}' skipped: {error}")
                 continue
             self.meshes[mesh_key] = _Mesh(mesh_id, (len(positions), len(triangles)), _digest(positions),
-                                          _digest(triangles))
+                                          _faces_digest(item.mesh))
         for item in items:
             known = self.meshes.get(item.mesh_key)
             if known is None:

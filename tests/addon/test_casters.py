@@ -421,3 +421,30 @@ def test_a_render_subdividing_a_caster_more_still_uses_the_cache(scene, tmp_path
     engine_bridge.last_timings.clear()
     bpy.ops.render.render(animation=True)
     assert cache.stale_reason(plane) is None and plane.name not in engine_bridge.last_timings
+
+
+def test_a_bending_quad_whose_diagonal_flips_is_refitted_not_rebuilt(scene, monkeypatch):
+    """Blender splits a quad along the other diagonal once it bends concave (a cloth does this
+    every few frames): same faces, so the caster is refitted, not rebuilt every frame."""
+    plane = ground(scene)
+    bpy.ops.mesh.primitive_plane_add(size=1.0, location=(0.0, 0.0, 0.6))
+    quad = bpy.context.object
+    casters_collection(scene, [plane, quad])
+    quad.shape_key_add(name="Basis")
+    bent = quad.shape_key_add(name="Bent")
+    corner = max(range(4), key=lambda i: bent.data[i].co.x - bent.data[i].co.y)  # the (+x, -y) corner
+    bent.data[corner].co = (-0.3, 0.3, 0.0)  # into the opposite half: concave there
+    for value, frame in ((0.0, 1), (1.0, 5)):
+        bent.value = value
+        bent.keyframe_insert("value", frame=frame)
+    triangles = []
+    for frame in (1, 5):
+        scene.frame_set(frame)
+        evaluated = quad.evaluated_get(bpy.context.evaluated_depsgraph_get()).data
+        triangles.append(mesh_io.triangles_of(evaluated).tolist())
+    assert sorted(map(sorted, triangles[0])) != sorted(map(sorted, triangles[1])), "the diagonal flipped"
+    scene.frame_set(1)
+    scene.hemishadow.live = True
+    calls = SceneCalls(monkeypatch)
+    scene.frame_set(5)
+    assert calls.of("set_vertices") == 1 and calls.of("add_mesh") == 0, "refitted, not rebuilt"
