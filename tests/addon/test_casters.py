@@ -448,3 +448,44 @@ def test_a_bending_quad_whose_diagonal_flips_is_refitted_not_rebuilt(scene, monk
     calls = SceneCalls(monkeypatch)
     scene.frame_set(5)
     assert calls.of("set_vertices") == 1 and calls.of("add_mesh") == 0, "refitted, not rebuilt"
+
+
+def test_a_walking_character_is_darkened_by_a_wall_it_passes(scene):
+    """A real imported, skinned and animated character (Cesium Man) walks past a wall: on the
+    frame it stands beside it, the side facing the wall darkens, and its AO is the engine's
+    for its evaluated mesh with the wall as casters (computed here without the add-on)."""
+    bpy.ops.import_scene.gltf(filepath=str(ROOT.parent / "shared" / "data" / "cesium_man.glb"))
+    character = next(o for o in scene.objects if o.type == "MESH" and o.find_armature())
+    character.hemishadow.enabled = True
+    rig = character.find_armature()
+    wall = cube(scene, name="Wall", location=(0.6, 0.0, 1.0), size=1.0)
+    wall.scale = (0.1, 2.0, 2.0)
+    casters_collection(scene, [wall, character])
+    for frame, x in ((1, -3.0), (10, 0.0)):  # far from the wall, then beside it
+        rig.location.x = x
+        rig.keyframe_insert("location", index=0, frame=frame)
+    scene.frame_set(1)
+    far = live_ao(scene, character)
+    scene.frame_set(10)
+    near = live_ao(scene, character)
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    evaluated = character.evaluated_get(depsgraph)
+    world = mesh_io.to_world(mesh_io.positions_of(evaluated.data, len(character.data.vertices)), evaluated.matrix_world)
+    facing = world[:, 0] > np.percentile(world[:, 0], 80)  # the side towards the wall
+    assert world[:, 0].max() < 0.55, "beside the wall, not through it"
+    assert near[facing].mean() < far[facing].mean() - 0.05
+    # The reference: the same evaluated mesh and wall through the engine alone.
+    rest = mesh_io.to_world(mesh_io.positions_of(character.data), evaluated.matrix_world)
+    solver = hemishadow.TransferSolver(rest, mesh_io.triangles_of(character.data), bands=1)
+    walls = hemishadow.Scene()
+    bm = bmesh.new()
+    bm.from_mesh(wall.data)
+    bmesh.ops.triangulate(bm, faces=bm.faces)
+    verts = np.array([v.co[:] for v in bm.verts], np.float32)
+    tris = np.array([[v.index for v in f.verts] for f in bm.faces], np.uint32)
+    bm.free()
+    walls.add_instance(walls.add_mesh(verts, tris), np.array(wall.matrix_world))
+    expected = hemishadow.ambient_occlusion(solver.solve(world, casters=walls))
+    print(f"AO near {near[facing].mean():.3f} far {far[facing].mean():.3f}; against the engine max {np.abs(near - expected).max():.4f} "
+          f"mean {np.abs(near - expected).mean():.5f}")
+    assert np.abs(near - expected).max() < 0.05 and np.abs(near - expected).mean() < 0.005
