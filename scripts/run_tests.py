@@ -35,7 +35,7 @@ OUT = ROOT / "out"
 PRIMARY = "5.3"
 # The second tier: the tests that go through the installed zip.
 TIER2_TESTS = ["tests/addon/test_package.py", "tests/addon/test_live.py", "tests/addon/test_world.py",
-               "tests/addon/test_bake.py", "tests/addon/test_cli.py"]
+               "tests/addon/test_bake.py", "tests/addon/test_cli.py", "tests/addon/test_casters.py"]
 
 
 def tier2_versions() -> list[str]:
