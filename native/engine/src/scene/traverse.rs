@@ -117,7 +117,9 @@ impl Walk<'_> {
         let local = Local::new(receiver, &transform);
         let tag = Tag { mesh, facing: transform.facing };
         let lod2 = self.lod * self.lod;
-        let error2 = (self.lod * ERROR_SHARE).powi(2);
+        static SHARE: std::sync::OnceLock<f32> = std::sync::OnceLock::new();
+        let share = *SHARE.get_or_init(|| super::experiment("HS_ERROR_SHARE").unwrap_or(ERROR_SHARE));
+        let error2 = (self.lod * share).powi(2);
         let stretch2 = transform.stretch * transform.stretch;
         let mut stack: Vec<u32> = Vec::with_capacity(64);
         stack.push(0);
