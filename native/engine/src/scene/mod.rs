@@ -14,6 +14,7 @@ pub mod affine;
 pub mod clusters;
 pub mod gather;
 pub mod ordered;
+pub mod pinholes;
 pub mod receivers;
 pub mod top;
 pub mod traverse;
