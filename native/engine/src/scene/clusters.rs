@@ -31,11 +31,6 @@ pub const BORDER_LIMIT: usize = 4;
 /// 3.2 % at 1, 2.2 % at 0.5, 2.0 % at 0.25, 2.6 % at 0; terrain 2.3, 1.9, 1.7, 1.6 %.
 pub const PUSH: f32 = 0.25;
 
-fn push() -> f32 {
-    static P: std::sync::OnceLock<f32> = std::sync::OnceLock::new();
-    *P.get_or_init(|| super::experiment("HS_PUSH").unwrap_or(PUSH))
-}
-
 /// Triangles over a compact list of mesh vertices, so that a receiver transforms each vertex
 /// once rather than once per corner.
 #[derive(Default, Clone, Debug)]
@@ -132,7 +127,7 @@ impl MeshTree {
     /// Recomputes every node's box and pushed-out proxy from this frame's positions.
     pub fn refit(&mut self, positions: &[Vec3]) {
         self.proxy_positions =
-            self.proxies.par_iter().zip(&self.proxy_error).map(|(p, &e)| pushed_out(positions, p, push() * e)).collect();
+            self.proxies.par_iter().zip(&self.proxy_error).map(|(p, &e)| pushed_out(positions, p, PUSH * e)).collect();
         let mut bounds = vec![EMPTY_BOX; self.nodes.len()];
         for n in (0..self.nodes.len()).rev() {
             let node = self.nodes[n];

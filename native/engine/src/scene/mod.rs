@@ -96,7 +96,7 @@ impl Scene {
             top: None,
             refit_top: false,
             lod: DEFAULT_LOD,
-            table_resolution: experiment("HS_TABLE").map_or(TABLE_RESOLUTION, |v| v as usize),
+            table_resolution: TABLE_RESOLUTION,
             stats: SceneStats::default(),
         }
     }
@@ -359,12 +359,7 @@ impl Scene {
 /// error on tests/test_scene.py's room, 2 x 2 3.2 %; on bench/scene.py's 100k scenes 1 x 1
 /// lowers 2 x 2's median by 0.25-0.5 points at the same cost.
 fn scene_downsample(brdf: crate::integrate::Brdf) -> Option<usize> {
-    matches!(brdf, crate::integrate::Brdf::Diffuse).then_some(experiment("HS_DOWNSAMPLE").map_or(1, |v| v as usize))
-}
-
-/// TEMPORARY experiment knob (removed before merge).
-pub fn experiment(name: &str) -> Option<f32> {
-    std::env::var(name).ok().and_then(|v| v.parse().ok())
+    matches!(brdf, crate::integrate::Brdf::Diffuse).then_some(1)
 }
 
 fn per_receiver_views(settings: &Settings, count: usize) -> Result<Option<Arc<Vec<Vec3>>>> {
