@@ -233,7 +233,8 @@ def run_case(name, make, target, count, processes):
 
 def markdown(rows, processes):
     lines = ["## Scene visibility (issue 10)", "",
-             f"`hemishadow.Scene.transfer` (default lod {hemishadow.Scene().lod:g}, 2 x 2 integration blocks) against Embree "
+             f"`hemishadow.Scene.transfer` (defaults: lod {hemishadow.Scene().lod:g}, 1 x 1 integration blocks, plane table "
+             f"{hemishadow.Scene().table_resolution}) against Embree "
              f"(embreex, {processes} processes, BVH build inside the timed region) at equal median error; "
              "errors against a dense Embree reference (48 x 48 stratified cosine rays). Receivers: 3/4 random surface "
              "points with face normals, 1/4 open air with axis normals. 'build' is hemishadow's hierarchy build "
