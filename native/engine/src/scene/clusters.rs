@@ -22,6 +22,9 @@ use crate::mesh::Vec3;
 pub const LEAF_TRIANGLES: usize = 64;
 /// Target size of every node's proxy.
 pub const PROXY_TRIANGLES: usize = 16;
+/// Coarser stand-ins for a whole mesh than its root's proxy, simplified from it (finest first):
+/// a distant object a cell or two wide costs a few triangles, not PROXY_TRIANGLES.
+pub const COARSE_TRIANGLES: [usize; 2] = [8, 4];
 /// A proxy may keep this many times PROXY_TRIANGLES to keep its borders closed.
 pub const BORDER_LIMIT: usize = 4;
 /// Proxy vertices move out by this fraction of the simplification error. meshoptimizer's error
@@ -84,6 +87,11 @@ pub struct MeshTree {
     pub proxy_error: Vec<f32>,
     /// Per node, its proxy's vertices (in `proxies[n].vertices` order) pushed out by the error.
     pub proxy_positions: Vec<Vec<Vec3>>,
+    /// Whole-mesh stand-ins coarser than the root's proxy (COARSE_TRIANGLES), their errors
+    /// (the root proxy's plus their own) and their pushed-out vertices, as for proxies.
+    pub coarse: Vec<Compact>,
+    pub coarse_error: Vec<f32>,
+    pub coarse_positions: Vec<Vec<Vec3>>,
     /// Per node, its box in mesh space (refitted by `refit`).
     pub bounds: Vec<[Vec3; 2]>,
     /// Per node, the centre of its box and half its diagonal.
@@ -109,6 +117,18 @@ impl MeshTree {
                 (Compact::new(tris.into_iter()), error)
             })
             .unzip();
+        let (mut coarse, mut coarse_error) = (Vec::new(), Vec::new());
+        let (mut from, mut error) = (proxies[0].mesh_triangles().collect::<Vec<_>>(), proxy_error[0]);
+        for target in COARSE_TRIANGLES {
+            let (tris, step) = simplify(positions, &from, target);
+            if tris.len() >= from.len() {
+                break;
+            }
+            error += step;
+            coarse.push(Compact::new(tris.iter().copied()));
+            coarse_error.push(error);
+            from = tris;
+        }
         let largest_compact = leaves.iter().chain(&proxies).map(|c| c.vertices.len()).max().unwrap_or(0);
         let mut tree = MeshTree {
             nodes,
@@ -116,6 +136,9 @@ impl MeshTree {
             proxies,
             proxy_error,
             proxy_positions: Vec::new(),
+            coarse,
+            coarse_error,
+            coarse_positions: Vec::new(),
             bounds: Vec::new(),
             spheres: Vec::new(),
             largest_compact,
@@ -137,6 +160,10 @@ impl MeshTree {
                 union(&bounds[node.children[0] as usize], &bounds[node.children[1] as usize])
             };
             bounds[n] = union(&bounds[n], &box_of(self.proxy_positions[n].iter().copied()));
+        }
+        self.coarse_positions = self.coarse.iter().zip(&self.coarse_error).map(|(c, &e)| pushed_out(positions, c, PUSH * e)).collect();
+        for c in &self.coarse_positions {
+            bounds[0] = union(&bounds[0], &box_of(c.iter().copied()));
         }
         self.spheres = bounds.iter().map(sphere_of).collect();
         self.bounds = bounds;

@@ -124,6 +124,21 @@ impl Walk<'_> {
         let lod2 = self.lod * self.lod;
         let error2 = (self.lod * ERROR_SHARE).powi(2);
         let stretch2 = transform.stretch * transform.stretch;
+        if local.below(&tree.bounds[0]) {
+            return;
+        }
+        // A distant object whose coarsest good-enough stand-in is coarser than the root's proxy.
+        let s = tree.spheres[0];
+        let q = local.apply([s[0], s[1], s[2]]);
+        let d2 = dot(q, q);
+        if s[3] * s[3] * stretch2 < d2 {
+            let coarse = (0..tree.coarse.len()).rev().find(|&k| tree.coarse_error[k].powi(2) * stretch2 < error2 * d2);
+            if let Some(k) = coarse {
+                let pushed = &tree.coarse_positions[k];
+                emit(&local, |v| pushed[v], &tree.coarse[k], tag, scratch, sink);
+                return;
+            }
+        }
         let mut stack: Vec<u32> = Vec::with_capacity(64);
         stack.push(0);
         while let Some(n) = stack.pop() {
