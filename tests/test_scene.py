@@ -375,6 +375,17 @@ def test_bad_input_raises_value_errors():
     assert scene.transfer([[0, 0, 2.0]], [[0, 0, 1]]).shape == (1, 25)
 
 
+def test_scene_queries_use_the_finer_plane_table():
+    scene = room().engine(hemishadow)
+    assert scene.table_resolution == 256
+    rng = np.random.default_rng(4)
+    points, normals = receivers_in_open_air(rng)
+    points, normals = points[:40], normals[:40]
+    default = scene.transfer(points, normals)
+    assert np.array_equal(default, scene.transfer(points, normals, table_resolution=256))
+    assert not np.array_equal(default, scene.transfer(points, normals, table_resolution=128))
+
+
 def test_phong_and_bands_follow_the_mesh_api():
     scene = hemishadow.Scene()
     scene.add_instance(scene.add_mesh(*grid(20.0, 3)))

@@ -348,6 +348,29 @@ mod tests {
     }
 
     #[test]
+    fn coarse_stand_ins_get_coarser_and_stay_in_the_root_box() {
+        let (v, t) = sphere(40);
+        let tree = MeshTree::build(&v, &t);
+        assert_eq!(tree.coarse.len(), COARSE_TRIANGLES.len());
+        let mut previous = (tree.proxies[0].triangles.len(), tree.proxy_error[0]);
+        for (k, c) in tree.coarse.iter().enumerate() {
+            assert!(!c.triangles.is_empty() && c.triangles.len() < previous.0, "level {k}: {}", c.triangles.len());
+            let e = tree.coarse_error[k];
+            // Measured: about 1.3 for the 4 triangles standing in for the unit sphere; never more
+            // than its diameter, or the level could never be chosen usefully.
+            assert!(e >= previous.1 && e <= 2.0, "level {k}: error {e}");
+            previous = (c.triangles.len(), e);
+            // Vertices of the sphere, pushed out by PUSH x the error, and inside the root's box.
+            let b = tree.bounds[0];
+            for p in &tree.coarse_positions[k] {
+                let r = crate::mesh::length(*p);
+                assert!(r >= 1.0 - 1e-4 && r <= 1.0 + PUSH * e + 1e-4, "level {k}: |p| {r}");
+                assert!((0..3).all(|a| p[a] >= b[0][a] && p[a] <= b[1][a]));
+            }
+        }
+    }
+
+    #[test]
     fn refit_follows_moved_vertices() {
         let (mut v, t) = sphere(20);
         let mut tree = MeshTree::build(&v, &t);
