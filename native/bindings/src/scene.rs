@@ -77,6 +77,12 @@ impl PyScene {
         self.inner.lod()
     }
 
+    /// The plane table resolution of `transfer`'s default, `visibility`, `valid` and `gather`.
+    #[getter]
+    fn table_resolution(&self) -> usize {
+        self.inner.table_resolution()
+    }
+
     /// Builds what is missing (cluster hierarchies, the top tree) now rather than on the first query.
     fn prepare(&mut self, py: Python<'_>) -> PyResult<()> {
         let inner = &mut self.inner;

@@ -82,6 +82,12 @@ class Scene:
         return self._native.size
 
     @property
+    def table_resolution(self):
+        """The plane table resolution of scene queries: 256, finer than the meshes' 128, because
+        scene receivers see many small distant triangles whose edge planes it rounds."""
+        return self._native.table_resolution
+
+    @property
     def triangle_count(self):
         """Triangles in the scene, each instance counted."""
         return self._native.triangle_count
@@ -134,18 +140,20 @@ class Scene:
         self._native.prepare()
 
     def transfer(self, points, normals, *, bands=5, brdf="diffuse", exponent=None, view=None, offset=None,
-                 downsample=None, table_resolution=_native.DEFAULT_TABLE_RESOLUTION, progress=None):
+                 downsample=None, table_resolution=None, progress=None):
         """Transfer vectors float32 (P, bands*bands) of receivers, with the definition and SH
         convention of `hemishadow.transfer` (diffuse: T_i = integral of Y_i V max(0, n.s)).
 
         view: for brdf="phong", the direction towards the viewer, (3,) or (P, 3).
         offset: fraction of the scene's size (default 1e-4). progress: as in `hemishadow.transfer`.
+        table_resolution: the plane table's (default: the scene's, 256; see `table_resolution`).
         """
         pts, norms = self._receivers(points, normals)
         exponent = _checks.brdf_exponent(brdf, exponent)
         view_one, view_each = _checks.view_arrays(brdf, view, len(pts))
         return self._native.transfer(pts, norms, _checks.band_count(bands), exponent, view_one, view_each,
-                                     _checks.offset(offset), int(table_resolution),
+                                     _checks.offset(offset),
+                                     self.table_resolution if table_resolution is None else int(table_resolution),
                                      None if downsample is None else int(downsample), _checks.progress(progress))
 
     def irradiance(self, points, normals, lighting, *, offset=None, progress=None):

@@ -22,10 +22,17 @@ use crate::mesh::Vec3;
 pub const LEAF_TRIANGLES: usize = 64;
 /// Target size of every node's proxy.
 pub const PROXY_TRIANGLES: usize = 16;
+/// Coarser stand-ins for a whole mesh than its root's proxy, simplified from it (finest first):
+/// a distant object a cell or two wide costs a few triangles, not PROXY_TRIANGLES.
+pub const COARSE_TRIANGLES: [usize; 2] = [8, 4];
 /// A proxy may keep this many times PROXY_TRIANGLES to keep its borders closed.
 pub const BORDER_LIMIT: usize = 4;
-/// Proxy vertices move out by this fraction of the simplification error.
-pub const PUSH: f32 = 1.0;
+/// Proxy vertices move out by this fraction of the simplification error. meshoptimizer's error
+/// is the largest deviation, most of the surface lies much closer: the whole error grew every
+/// distant silhouette (against rays through the cells, masks had 10x more spurious cells than
+/// missed ones). Measured on bench/scene.py's 100k scenes (median error of transfer): crowd
+/// 3.2 % at 1, 2.2 % at 0.5, 2.0 % at 0.25, 2.6 % at 0; terrain 2.3, 1.9, 1.7, 1.6 %.
+pub const PUSH: f32 = 0.25;
 
 /// Triangles over a compact list of mesh vertices, so that a receiver transforms each vertex
 /// once rather than once per corner.
@@ -75,10 +82,16 @@ pub struct MeshTree {
     pub leaves: Vec<Compact>,
     /// One proxy per node.
     pub proxies: Vec<Compact>,
-    /// Per node, how far its proxy may lie inside the surface it stands for (mesh units).
+    /// Per node, how far its proxy may lie from the surface it stands for (mesh units): the
+    /// simplifier's error, which selects the level of detail; proxies are pushed out by PUSH x it.
     pub proxy_error: Vec<f32>,
     /// Per node, its proxy's vertices (in `proxies[n].vertices` order) pushed out by the error.
     pub proxy_positions: Vec<Vec<Vec3>>,
+    /// Whole-mesh stand-ins coarser than the root's proxy (COARSE_TRIANGLES), their errors
+    /// (the root proxy's plus their own) and their pushed-out vertices, as for proxies.
+    pub coarse: Vec<Compact>,
+    pub coarse_error: Vec<f32>,
+    pub coarse_positions: Vec<Vec<Vec3>>,
     /// Per node, its box in mesh space (refitted by `refit`).
     pub bounds: Vec<[Vec3; 2]>,
     /// Per node, the centre of its box and half its diagonal.
@@ -101,9 +114,21 @@ impl MeshTree {
             .into_par_iter()
             .map(|n| {
                 let (tris, error) = simplify(positions, &subtree(n), PROXY_TRIANGLES);
-                (Compact::new(tris.into_iter()), PUSH * error)
+                (Compact::new(tris.into_iter()), error)
             })
             .unzip();
+        let (mut coarse, mut coarse_error) = (Vec::new(), Vec::new());
+        let (mut from, mut error) = (proxies[0].mesh_triangles().collect::<Vec<_>>(), proxy_error[0]);
+        for target in COARSE_TRIANGLES {
+            let (tris, step) = simplify(positions, &from, target);
+            if tris.len() >= from.len() {
+                break;
+            }
+            error += step;
+            coarse.push(Compact::new(tris.iter().copied()));
+            coarse_error.push(error);
+            from = tris;
+        }
         let largest_compact = leaves.iter().chain(&proxies).map(|c| c.vertices.len()).max().unwrap_or(0);
         let mut tree = MeshTree {
             nodes,
@@ -111,6 +136,9 @@ impl MeshTree {
             proxies,
             proxy_error,
             proxy_positions: Vec::new(),
+            coarse,
+            coarse_error,
+            coarse_positions: Vec::new(),
             bounds: Vec::new(),
             spheres: Vec::new(),
             largest_compact,
@@ -122,7 +150,7 @@ impl MeshTree {
     /// Recomputes every node's box and pushed-out proxy from this frame's positions.
     pub fn refit(&mut self, positions: &[Vec3]) {
         self.proxy_positions =
-            self.proxies.par_iter().zip(&self.proxy_error).map(|(p, &e)| pushed_out(positions, p, e)).collect();
+            self.proxies.par_iter().zip(&self.proxy_error).map(|(p, &e)| pushed_out(positions, p, PUSH * e)).collect();
         let mut bounds = vec![EMPTY_BOX; self.nodes.len()];
         for n in (0..self.nodes.len()).rev() {
             let node = self.nodes[n];
@@ -132,6 +160,10 @@ impl MeshTree {
                 union(&bounds[node.children[0] as usize], &bounds[node.children[1] as usize])
             };
             bounds[n] = union(&bounds[n], &box_of(self.proxy_positions[n].iter().copied()));
+        }
+        self.coarse_positions = self.coarse.iter().zip(&self.coarse_error).map(|(c, &e)| pushed_out(positions, c, PUSH * e)).collect();
+        for c in &self.coarse_positions {
+            bounds[0] = union(&bounds[0], &box_of(c.iter().copied()));
         }
         self.spheres = bounds.iter().map(sphere_of).collect();
         self.bounds = bounds;
@@ -313,6 +345,29 @@ mod tests {
             }
         }
         assert!(tree.proxies[0].triangles.len() <= PROXY_TRIANGLES * 3 / 2);
+    }
+
+    #[test]
+    fn coarse_stand_ins_get_coarser_and_stay_in_the_root_box() {
+        let (v, t) = sphere(40);
+        let tree = MeshTree::build(&v, &t);
+        assert_eq!(tree.coarse.len(), COARSE_TRIANGLES.len());
+        let mut previous = (tree.proxies[0].triangles.len(), tree.proxy_error[0]);
+        for (k, c) in tree.coarse.iter().enumerate() {
+            assert!(!c.triangles.is_empty() && c.triangles.len() < previous.0, "level {k}: {}", c.triangles.len());
+            let e = tree.coarse_error[k];
+            // Measured: about 1.3 for the 4 triangles standing in for the unit sphere; never more
+            // than its diameter, or the level could never be chosen usefully.
+            assert!(e >= previous.1 && e <= 2.0, "level {k}: error {e}");
+            previous = (c.triangles.len(), e);
+            // Vertices of the sphere, pushed out by PUSH x the error, and inside the root's box.
+            let b = tree.bounds[0];
+            for p in &tree.coarse_positions[k] {
+                let r = crate::mesh::length(*p);
+                assert!(r >= 1.0 - 1e-4 && r <= 1.0 + PUSH * e + 1e-4, "level {k}: |p| {r}");
+                assert!((0..3).all(|a| p[a] >= b[0][a] && p[a] <= b[1][a]));
+            }
+        }
     }
 
     #[test]
