@@ -14,13 +14,13 @@ pub struct CasterCache {
     /// The instances whose blockers are in `masks` (ascending), and their stamps then.
     still: Vec<u32>,
     still_stamps: Vec<u64>,
-    /// Per welded receiver: its own blockers and the still instances'.
-    pub masks: Vec<Mask>,
+    /// Per welded receiver: its own blockers' mask and the still instances' raw mask.
+    pub masks: Vec<(Mask, Mask)>,
 }
 
 impl CasterCache {
     pub fn bytes(&self) -> usize {
-        self.masks.len() * std::mem::size_of::<Mask>() + (self.stamps.len() + self.still_stamps.len()) * 8 + self.still.len() * 4
+        self.masks.len() * std::mem::size_of::<(Mask, Mask)>() + (self.stamps.len() + self.still_stamps.len()) * 8 + self.still.len() * 4
     }
 }
 
@@ -58,7 +58,7 @@ impl CasterPlan {
     }
 
     /// The cache for the next frame, with this frame's masks (own and still blockers).
-    pub fn into_cache(self, casters: &Casters, masks: Vec<Mask>) -> CasterCache {
+    pub fn into_cache(self, casters: &Casters, masks: Vec<(Mask, Mask)>) -> CasterCache {
         let stamps = casters.stamps().to_vec();
         let still_stamps = self.still.iter().map(|&i| stamps[i as usize]).collect();
         CasterCache { key: casters.key().clone(), stamps, still: self.still, still_stamps, masks }

@@ -221,7 +221,8 @@ impl Solver {
         let cache = self.last.as_ref().and_then(|l| l.casters.as_ref());
         let plan = casters.map(|c| CasterPlan::new(cache, c));
         let keep_masks = casters.is_some() && self.blockers.reuse;
-        let masks: Vec<Mutex<Mask>> = (0..if keep_masks { frame.positions.len() } else { 0 }).map(|_| Mutex::new(Mask::EMPTY)).collect();
+        let masks: Vec<Mutex<(Mask, Mask)>> =
+            (0..if keep_masks { frame.positions.len() } else { 0 }).map(|_| Mutex::new((Mask::EMPTY, Mask::EMPTY))).collect();
         let k = self.coeffs();
         let mut welded = vec![0.0f32; frame.positions.len() * k];
         let (blockers, reused) = (AtomicU64::new(0), AtomicU64::new(0));
@@ -444,31 +445,39 @@ impl Solver {
             .collect()
     }
 
-    /// Transfer of welded receiver `r` into `out`: its own blockers (or `cached`, the mask of
-    /// its own and the still casters from the last frame), then the casters per `plan`.
-    fn receiver(&self, r: usize, frame: &Frame, casters: Option<(&Casters, &CasterPlan)>, cached: Option<Mask>, scratch: &mut Vec<Vec3>, out: &mut [f32]) -> Step {
+    /// Transfer of welded receiver `r` into `out`: its own blockers and the still casters'
+    /// (or `cached`, their masks from the last frame), then the moving casters, per `plan`.
+    #[allow(clippy::too_many_arguments)]
+    fn receiver(&self, r: usize, frame: &Frame, casters: Option<(&Casters, &CasterPlan)>, cached: Option<(Mask, Mask)>, scratch: &mut Vec<Vec3>, out: &mut [f32]) -> Step {
         let Some(receiver) = Receiver::new(frame.positions[r], frame.normals[r], self.offset) else {
             out.fill(0.0);
-            return Step { base: Some(Mask::EMPTY), count: 0 };
+            return Step { base: Some((Mask::EMPTY, Mask::EMPTY)), count: 0 };
         };
-        let table = &*self.table;
-        let (mut mask, mut count) = match cached {
-            Some(mask) => (mask, 0),
+        let occlude = |skip: &[u32], scratch: &mut Vec<Vec3>| match casters {
+            Some((c, _)) => c.occlude(&self.normalization, &receiver, skip, scratch),
+            None => (Mask::EMPTY, 0),
+        };
+        let ((own, still), mut count) = match cached {
+            Some(masks) => (masks, 0),
             None => {
-                let (mut mask, mut count) = self.own_mask(r, frame, &receiver);
-                if let Some((c, plan)) = casters.filter(|_| mask != self.disk) {
-                    count += c.occlude(table, &self.normalization, &receiver, &plan.skip_moving, self.disk, &mut mask, scratch);
-                }
-                (mask, count)
+                let (own, count) = self.own_mask(r, frame, &receiver);
+                let (still, more) = match casters.filter(|_| own != self.disk) {
+                    Some((_, plan)) => occlude(&plan.skip_moving, scratch),
+                    None => (Mask::EMPTY, 0),
+                };
+                ((own, still), count + more)
             }
         };
-        let base = mask;
-        if let Some((c, plan)) = casters.filter(|_| mask != self.disk) {
-            count += c.occlude(table, &self.normalization, &receiver, &plan.skip_still, self.disk, &mut mask, scratch);
+        let mut mask = own;
+        if let Some((c, plan)) = casters.filter(|_| own != self.disk) {
+            let (mut cast, more) = occlude(&plan.skip_still, scratch);
+            cast.or_assign(&still);
+            mask.or_assign(&c.close_pinholes(&cast));
+            count += more;
         }
         let view = frame.views.as_ref().map_or(receiver.frame.n, |v| v[r]);
         self.quadrature.integrate(&mask, &receiver.frame, self.brdf, view, out);
-        Step { base: Some(base), count }
+        Step { base: Some((own, still)), count }
     }
 
     /// The mask of receiver `r`'s own blockers and their count. The hot loop is compiled
@@ -542,10 +551,10 @@ impl Solver {
     }
 }
 
-/// What computing (or reusing) one receiver left: the mask of its own and the still casters'
-/// blockers (for the next frame), and how many blockers it rasterized.
+/// What computing (or reusing) one receiver left: the masks of its own and of the still
+/// casters' blockers (for the next frame), and how many blockers it rasterized.
 struct Step {
-    base: Option<Mask>,
+    base: Option<(Mask, Mask)>,
     count: u64,
 }
 

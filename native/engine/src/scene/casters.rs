@@ -4,7 +4,9 @@
 //! there keeps its directions (rotations and mirrors keep angles), so the scene's blockers
 //! rasterize into the same visibility mask as the solver's own triangles.
 
-use crate::disk_mask::Mask;
+use crate::disk_mask::{disk, Mask};
+use std::sync::Arc;
+
 use crate::error::{Error, Result};
 use crate::mesh::{Normalization, Vec3};
 use crate::plane_table::PlaneTable;
@@ -12,7 +14,8 @@ use crate::integrate::Frame;
 use crate::transfer::Receiver;
 
 use super::clusters::MeshTree;
-use super::traverse::{MaskSink, Walk};
+use super::pinholes;
+use super::traverse::{MaskSink, Walk, PINHOLE_NEIGHBOURS};
 use super::Scene;
 
 /// An orthogonal 3x3 part (a mirror allowed) and a translation.
@@ -73,6 +76,9 @@ pub struct Casters<'a> {
     positions: Vec<&'a [Vec3]>,
     scene: &'a Scene,
     key: CastersKey,
+    /// The scene's (finer than a solver's: far casters are small triangles).
+    table: Arc<PlaneTable>,
+    full: Mask,
 }
 
 impl Scene {
@@ -91,7 +97,8 @@ impl Scene {
         exclude.dedup();
         let (trees, positions) = self.walk_parts();
         let key = CastersKey { to_world, exclude, lod: self.lod.to_bits() };
-        Ok(Casters { trees, positions, scene: self, key })
+        let table = PlaneTable::shared(self.table_resolution)?;
+        Ok(Casters { trees, positions, scene: self, key, table, full: disk() })
     }
 }
 
@@ -113,11 +120,11 @@ impl Casters<'_> {
         skip
     }
 
-    /// Rasterizes the blockers of `receiver` (in the solver's normalised space, which
-    /// `normalization` made from the solver's input) into `mask`, skipping the instances in
-    /// `skip` (ascending, see `skipping`); returns the triangle count.
-    #[allow(clippy::too_many_arguments)]
-    pub fn occlude(&self, table: &PlaneTable, normalization: &Normalization, receiver: &Receiver, skip: &[u32], full: Mask, mask: &mut Mask, scratch: &mut Vec<Vec3>) -> u64 {
+    /// The raw mask of the blockers of `receiver` (in the solver's normalised space, which
+    /// `normalization` made from the solver's input), skipping the instances in `skip`
+    /// (ascending, see `skipping`), and the triangle count. Finish the union of a receiver's
+    /// raw masks with `close_pinholes`.
+    pub fn occlude(&self, normalization: &Normalization, receiver: &Receiver, skip: &[u32], scratch: &mut Vec<Vec3>) -> (Mask, u64) {
         let place = &self.key.to_world;
         let Frame { t, b, n } = receiver.frame;
         let world = Receiver {
@@ -127,10 +134,15 @@ impl Casters<'_> {
         let scene = self.scene;
         let top = scene.top.as_ref().expect("prepared by Scene::casters");
         let walk = Walk { trees: &self.trees, positions: &self.positions, instances: &scene.instances, top, lod: scene.lod, exclude: skip };
-        let mut sink = MaskSink::onto(table, *mask, full);
+        let mut sink = MaskSink::new(&self.table, self.full);
         walk.run(&world, scratch, &mut sink);
-        let (result, triangles) = sink.finish();
-        *mask = result;
-        triangles
+        sink.finish_raw()
+    }
+
+    /// The casters' mask with pinholes closed as in every scene query (`pinholes`); once, on
+    /// the union of a receiver's raw masks, so that splitting the casters changes nothing.
+    /// The solver's own blockers are not part of it: their seams are welded already.
+    pub fn close_pinholes(&self, mask: &Mask) -> Mask {
+        pinholes::close(mask, &self.full, PINHOLE_NEIGHBOURS)
     }
 }

@@ -206,17 +206,18 @@ pub struct MaskSink<'a> {
 
 impl<'a> MaskSink<'a> {
     pub fn new(table: &'a PlaneTable, full: Mask) -> Self {
-        MaskSink::onto(table, Mask::EMPTY, full)
+        MaskSink { table, batch: TriangleBatch::default(), mask: Mask::EMPTY, full, triangles: 0 }
     }
 
-    /// A sink whose mask starts as `mask` (blockers rasterized already elsewhere).
-    pub fn onto(table: &'a PlaneTable, mask: Mask, full: Mask) -> Self {
-        MaskSink { table, batch: TriangleBatch::default(), mask, full, triangles: 0 }
+    pub fn finish(self) -> (Mask, u64) {
+        let full = self.full;
+        let (mask, triangles) = self.finish_raw();
+        (super::pinholes::close(&mask, &full, PINHOLE_NEIGHBOURS), triangles)
     }
 
-    pub fn finish(mut self) -> (Mask, u64) {
+    /// The mask without closing pinholes (for callers that add more blockers first).
+    pub fn finish_raw(mut self) -> (Mask, u64) {
         self.batch.finish(self.table, &mut self.mask);
-        self.mask = super::pinholes::close(&self.mask, &self.full, PINHOLE_NEIGHBOURS);
         (self.mask, self.triangles)
     }
 }
