@@ -83,8 +83,7 @@ _TARGETS = [(x, y) for y in (-1 / 32, 1 / 32) for x in (-1 / 32, 1 / 32)]
 
 
 def _branch_frame(q, sign):
-    with np.errstate(divide="ignore", invalid="ignore"):
-        a = -1.0 / (sign + q[:, 2])
+    a = -1.0 / (sign + q[:, 2])  # the other branch is singular near its pole: NaN, rejected
     b = q[:, 0] * q[:, 1] * a
     t = np.stack([1.0 + sign * q[:, 0] ** 2 * a, sign * b, -sign * q[:, 0]], axis=1)
     bt = np.stack([b, sign + q[:, 1] ** 2 * a, -q[:, 1]], axis=1)
@@ -98,6 +97,12 @@ def shadow_normals(directions, ng):
     best_q = directions.copy()
     best_cell = np.full(len(directions), -1)
     best_score = np.full(len(directions), -np.inf)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        _search(directions, ng, best_q, best_cell, best_score)
+    return best_q, best_cell
+
+
+def _search(directions, ng, best_q, best_cell, best_score):
     for x, y in _TARGETS:
         z = np.sqrt(1 - x * x - y * y)
         for sign in (1.0, -1.0):
@@ -113,7 +118,6 @@ def shadow_normals(directions, ng):
             better = score > best_score
             best_q[better], best_score[better] = q[better], score[better]
             best_cell[better] = int(round((y + 1) * 16 - 0.5)) * 32 + int(round((x + 1) * 16 - 0.5))
-    return best_q, best_cell
 
 
 def engine_frame_f32(q):

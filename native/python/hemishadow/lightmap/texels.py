@@ -26,6 +26,7 @@ class Texels:
     bary: np.ndarray       # (S, 3) float64 barycentric weights of the triangle's corners
     coverage: np.ndarray   # (R, R) bool: a texel centre inside a triangle
     island: np.ndarray     # (R, R) bool: texels with at least one sample
+    index: np.ndarray      # (S,) int64: which of the texel's sample positions (0 for rim samples)
     overlapping: int       # samples strictly inside more than one triangle (overlapping UVs)
 
 
@@ -137,7 +138,7 @@ def rasterize(uv, resolution, samples):
     order = np.argsort(keys, kind="stable")  # a sample on a shared edge: the first triangle's
     first = order[np.r_[True, keys[order][1:] != keys[order][:-1]]] if len(keys) else order
     keys = keys[first]
-    texel, tris, bary = keys // len(offs), tris[first], bary[first]
+    texel, tris, bary, index = keys // len(offs), tris[first], bary[first], keys % len(offs)
     # texels touched by a triangle but holding no sample: the triangle's point nearest the centre
     t_cells, t_tris = np.concatenate(touched_t), np.concatenate(touched_tri)
     has_sample = np.zeros(r * r, bool)
@@ -151,4 +152,5 @@ def rasterize(uv, resolution, samples):
     island = np.zeros(r * r, bool)
     island[texel] = True
     return Texels(texel=texel, triangle=np.concatenate([tris, t_tris]), bary=np.concatenate([bary, t_bary]),
-                  coverage=coverage.reshape(r, r), island=island.reshape(r, r), overlapping=int(overlapping))
+                  coverage=coverage.reshape(r, r), island=island.reshape(r, r),
+                  index=np.concatenate([index, np.zeros(len(t_cells), np.int64)]), overlapping=int(overlapping))

@@ -1,0 +1,236 @@
+"""The lightmap baker's engine part: texels in, maps out (issue 11).
+
+`bake(scene, targets, resolution=...)` returns, per target, float32 maps of the outgoing
+radiance of a white Lambertian surface (irradiance / pi; what Cycles' Diffuse bake gives
+with Direct + Indirect and Color off): `flat` (interpolated shading normal), `b0`, `b1`, `b2`
+(HL2 basis, basis="hl2") or `sh0`..`sh3` (L1 SH of the incident radiance / pi, world space,
+basis="sh"), each (R, R, 3); `ao` (R, R), 1 = open; `coverage` (R, R), 1 where a texel
+centre lies in a UV triangle (before padding); `valid` (R, R), texels with a valid receiver
+before filling. See docs/lightmaps.md.
+"""
+
+import warnings
+
+import numpy as np
+
+from .. import Cancelled
+from . import basis as frames
+from . import bounce, cells, dilate, geometry, light, seams, texels
+from .geometry import Surface, Target
+
+BASES = ("hl2", "sh", "flat")
+_CHUNK = 2048
+
+
+def _positive_int(value, what, minimum=1):
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
+        raise ValueError(f"{what} must be an integer >= {minimum}, got {value!r}")
+    return int(value)
+
+
+def _lighting(lighting):
+    if lighting is None:
+        return None
+    array = geometry.finite(lighting, "lighting", (-1, 3))
+    if len(array) not in (1, 4, 9, 16, 25):
+        raise ValueError(f"lighting must have 1, 4, 9, 16 or 25 SH coefficients per colour, got {len(array)}")
+    return array.astype(np.float32)
+
+
+def _suns(suns):
+    out = []
+    for i, sun in enumerate(suns):
+        d = geometry.finite(sun.direction, f"sun {i}: direction", (3,))
+        if not np.linalg.norm(d) > 0:
+            raise ValueError(f"sun {i}: direction is zero")
+        strength = np.asarray(sun.strength, dtype=np.float64)
+        if strength.size not in (1, 3) or not np.isfinite(strength).all():
+            raise ValueError(f"sun {i}: strength must be a finite number or RGB triple")
+        if not (np.isfinite(sun.angle) and 0 <= sun.angle < np.pi):
+            raise ValueError(f"sun {i}: angle must be in [0, pi) radians, got {sun.angle!r}")
+        out.append(light.Sun(d / np.linalg.norm(d), strength, float(sun.angle)))
+    return out
+
+
+class _Progress:
+    def __init__(self, callback, total):
+        self.callback, self.total, self.done = callback, max(total, 1), 0
+
+    def step(self, amount=1):
+        self.done += amount
+        if self.callback is not None and self.callback(min(self.done / self.total, 1.0)) is False:
+            raise Cancelled("lightmap bake cancelled")
+
+
+def _direct(scene, points, ng, lobes, lighting, suns, index, offsets, want_sh, offset, progress):
+    """Direct light (P, L, 3), ao (P,), L1 SH (P, 4, 3) or None, for samples."""
+    p = len(points)
+    blocked = cells.unpack(scene.visibility(points, ng, offset=offset))
+    t, b = cells.engine_frame(ng)
+    maps = np.zeros(lobes.shape[:2] + (3,), np.float32)
+    ao = np.ones(p, np.float32)
+    sh = np.zeros((p, 4, 3), np.float32) if want_sh else None
+    for start in range(0, p, _CHUNK):
+        s = slice(start, start + _CHUNK)
+        m, a, h = light.environment(blocked[s], t[s], b[s], ng[s], lobes[s], lighting, want_sh)
+        maps[s], ao[s] = m, a
+        if want_sh:
+            sh[s] = h
+        progress.step(min(_CHUNK, p - start))
+    for sun in suns:
+        dirs = light.sun_directions(sun, p, index, offsets)
+        lit = light.sun_visibility(scene, points, ng, dirs, offset=offset)
+        m, h = light.sun_light(sun, lit, ng, lobes, dirs, want_sh)
+        maps += m
+        if want_sh:
+            sh += h
+    return maps, ao, sh
+
+
+def _sample_geometry(target, resolution, samples):
+    """Texels of a target and, per sample, world position, geometric normal, lobes' frame."""
+    pos, ng, normals, tangents, uv, tris = geometry.target_corners(target)
+    tx = texels.rasterize(uv, resolution, samples)
+    if not len(tx.texel):
+        warnings.warn(f"{target.label}: its lightmap UVs cover no texel of the {resolution} x {resolution} map",
+                      RuntimeWarning, stacklevel=3)
+    if tx.overlapping:
+        warnings.warn(f"{target.label}: its lightmap UV islands overlap ({tx.overlapping} samples in more than "
+                      "one triangle); each texel keeps the first triangle", RuntimeWarning, stacklevel=3)
+    w = tx.bary[:, :, None]
+    points = (pos[tx.triangle] * w).sum(1)
+    t, b, n = frames.tangent_frames((normals[tx.triangle] * w).sum(1), (tangents[tx.triangle] * w).sum(1))
+    return tx, points, ng[tx.triangle], (t, b, n), tris, uv
+
+
+def _texel_maps(tx, resolution, values, valid):
+    """Mean of the valid samples of each texel: (R, R, C) and the texels that had one."""
+    r2 = resolution * resolution
+    count = np.bincount(tx.texel[valid], minlength=r2)
+    out = np.stack([np.bincount(tx.texel[valid], values[valid, c], r2) for c in range(values.shape[1])], axis=1)
+    out = out / np.maximum(count, 1)[:, None]
+    return out.reshape(resolution, resolution, -1).astype(np.float32), (count > 0).reshape(resolution, resolution)
+
+
+def bake(scene, targets, *, resolution, lighting=None, suns=(), surfaces=(), bounces=2, samples=4, margin=2,
+         basis="hl2", offset=None, stitch_seams=True, progress=None):
+    """Bakes lightmaps of `targets` (`Target`s) in `scene` (a `hemishadow.Scene` holding every
+    blocker); returns one dict of maps per target (see the module docstring).
+
+    resolution: texels per side, one int for all targets or one per target.
+    lighting: environment SH (K, 3), K = 1, 4, 9, 16 or 25, radiance in the project's convention
+        (`hemishadow.project_environment`, the add-on's World); None: no environment.
+    suns: `Sun`s (direction towards the light, strength in W/m^2, angular diameter).
+    surfaces: `Surface`s of the meshes that reflect or emit light besides the targets' own
+        (bounce receivers at their vertices); meshes not described stay black (block only).
+    bounces: diffuse bounces (0: direct light only). samples: supersamples per texel, in total.
+    margin: texels of padding around islands. basis: "hl2" (flat, b0-b2, ao), "sh" (flat,
+        sh0-sh3, ao) or "flat" (flat, ao). offset: the receivers' lift (`Scene`'s default).
+    progress: None or a callable taking the fraction done; returning False raises
+        `hemishadow.Cancelled` and nothing is returned.
+    """
+    if basis not in BASES:
+        raise ValueError(f"basis must be one of {BASES}, got {basis!r}")
+    targets = list(targets)
+    if not targets:
+        raise ValueError("no targets to bake")
+    if isinstance(resolution, (list, tuple, np.ndarray)):
+        if len(resolution) != len(targets):
+            raise ValueError(f"{len(resolution)} resolutions for {len(targets)} targets")
+        sizes = [_positive_int(r, "resolution") for r in resolution]
+    else:
+        sizes = [_positive_int(resolution, "resolution")] * len(targets)
+    samples = _positive_int(samples, "samples")
+    margin = _positive_int(margin, "margin", 0)
+    bounces = _positive_int(bounces, "bounces", 0)
+    lighting, suns = _lighting(lighting), _suns(suns)
+    want_sh = basis == "sh"
+    offs = texels.offsets(samples)
+
+    geo = [_sample_geometry(tg, r, samples) for tg, r in zip(targets, sizes)]
+    split = np.cumsum([len(g[0].texel) for g in geo])[:-1]
+    points = np.concatenate([g[1] for g in geo])
+    ng = np.concatenate([g[2] for g in geo])
+    t, b, n = (np.concatenate([g[3][k] for g in geo]) for k in range(3))
+    index = np.concatenate([g[0].index for g in geo])
+    lobes = n[:, None] if basis != "hl2" else np.concatenate([n[:, None], frames.hl2_world(t, b, n)], axis=1)
+
+    receivers = _bounce_receivers(targets, surfaces) if (bounces or _emits(targets, surfaces)) else []
+    vertex_count = sum(len(r[1]) for r in receivers)
+    steps = _Progress(progress, len(points) + vertex_count * (1 + bounces) + len(points) * bool(receivers))
+    usable = np.linalg.norm(ng, axis=1) > 0.5
+    valid = np.zeros(len(points), bool)
+    if usable.any():
+        valid[usable] = scene.valid(points[usable], ng[usable], offset=offset)
+    ng_safe = np.where(usable[:, None], ng, n)
+    maps, ao, sh = _direct(scene, points, ng_safe, lobes, lighting, suns, index, offs, want_sh, offset, steps)
+
+    if receivers:
+        direct_v = []
+        for mesh_id, pts, nrm, ok, _, _ in receivers:
+            d = np.zeros((len(pts), 3), np.float32)
+            if ok.any():
+                d[ok] = _direct(scene, pts[ok], nrm[ok], nrm[ok][:, None], lighting, suns,
+                                np.zeros(ok.sum(), np.int64), offs, False, offset, steps)[0][:, 0]
+            direct_v.append(d)
+        radiance = bounce.vertex_radiance(scene, receivers, direct_v, bounces, offset)
+        steps.step(vertex_count * bounces)
+        if any(r.any() for r in radiance):
+            g = scene.gather(points, ng_safe, bands=bounce.BANDS, offset=offset)
+            maps += bounce.lobe_irradiance(g, lobes)
+            if want_sh:
+                sh += g[:, :4] / np.float32(np.pi)
+        steps.step(len(points))
+
+    names = ["flat"] + (["b0", "b1", "b2"] if basis == "hl2" else []) + (["sh0", "sh1", "sh2", "sh3"] if want_sh else [])
+    columns = [maps.reshape(len(points), -1)]
+    if want_sh:
+        columns.append(sh.reshape(len(points), -1))
+    columns.append(ao[:, None])
+    values = np.concatenate(columns, axis=1)
+    results = []
+    for k, (tg, r, (tx, *_rest, tris, uv)) in enumerate(zip(targets, sizes, geo)):
+        part = slice(split[k - 1] if k else 0, split[k] if k < len(split) else len(points))
+        results.append(_finish(tx, r, values[part], valid[part], tris, uv, names, margin, stitch_seams))
+    return results
+
+
+def _finish(tx, resolution, values, valid, tris, uv, names, margin, stitch_seams):
+    """Texel means, invalid texels filled, padding, seams; the dict of named maps."""
+    image, known = _texel_maps(tx, resolution, values, valid)
+    had_valid = known.copy()
+    dilate.fill(image, known, tx.island)
+    dilate.dilate(image, known, margin)
+    if stitch_seams:
+        a, b = seams.seam_points(tris, uv, resolution)
+        seams.stitch(image, known, a, b)
+    out = {name: np.ascontiguousarray(image[..., 3 * i:3 * i + 3]) for i, name in enumerate(names)}
+    out["ao"] = np.ascontiguousarray(image[..., -1])
+    out["coverage"] = tx.coverage.astype(np.float32)
+    out["valid"] = had_valid
+    return out
+
+
+def _emits(targets, surfaces):
+    return any(np.any(np.asarray(s.emission) != 0) for s in list(surfaces) + [t.surface for t in targets])
+
+
+def _bounce_receivers(targets, surfaces):
+    """(mesh_id, points, normals, usable, albedo, emission) per distinct mesh."""
+    seen, out = set(), []
+    for surface in list(surfaces) + [t.surface for t in targets]:
+        if surface.mesh_id in seen:
+            continue
+        seen.add(surface.mesh_id)
+        label = surface.name or f"mesh {surface.mesh_id}"
+        pts, nrm = geometry.vertex_receivers(surface)
+        length = np.linalg.norm(nrm, axis=1)
+        usable = length > 0
+        nrm = nrm / np.where(usable, length, 1.0)[:, None]
+        albedo = geometry.per_vertex(surface.albedo, len(pts), "albedo", label)
+        emission = geometry.per_vertex(surface.emission, len(pts), "emission", label)
+        out.append((surface.mesh_id, pts, nrm, usable, albedo, emission))
+    return out
+
+
+__all__ = ["BASES", "Surface", "Target", "bake"]
