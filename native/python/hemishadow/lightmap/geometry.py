@@ -120,14 +120,26 @@ def target_corners(target):
     return pos, ng, normals, tangents, uv, tris
 
 
+#: Vertex receivers move this fraction of the way towards the mean centroid of their
+#: triangles: a vertex where a floor meets a wall would otherwise see half its hemisphere
+#: through the junction (outside the room) and pass on half the light.
+VERTEX_INSET = 0.02
+
+
 def vertex_receivers(surface):
-    """World positions (V, 3) and area-weighted normals (V, 3) of a surface's vertices."""
+    """World positions (V, 3), nudged off junctions (`VERTEX_INSET`), and area-weighted
+    normals (V, 3) of a surface's vertices."""
     world, tris, linear, normal_matrix = placed(surface, surface.name or f"mesh {surface.mesh_id}")
     local = np.asarray(surface.vertices, dtype=np.float64)[tris]
     face = np.cross(local[:, 1] - local[:, 0], local[:, 2] - local[:, 0]) @ normal_matrix.T
     area = np.linalg.norm(np.cross(world[tris][:, 1] - world[tris][:, 0], world[tris][:, 2] - world[tris][:, 0]), axis=1)
     face = face / np.maximum(np.linalg.norm(face, axis=1, keepdims=True), 1e-300) * area[:, None]
     normals = np.zeros_like(world)
+    centroids = np.zeros_like(world)
+    centroid = world[tris].mean(axis=1)
     for k in range(3):
         np.add.at(normals, tris[:, k], face)
-    return world, normals
+        np.add.at(centroids, tris[:, k], centroid)
+    count = np.bincount(tris.ravel(), minlength=len(world))[:, None]
+    inset = np.where(count > 0, centroids / np.maximum(count, 1) - world, 0.0)
+    return world + VERTEX_INSET * inset, normals

@@ -59,22 +59,40 @@ def lookup(values, points):
 
 
 def stitch(values, known, a, b, iterations=200, tolerance=1e-6):
-    """Makes the bilinear lookups at `a` and `b` agree by changing known texels. In place."""
+    """Makes the bilinear lookups at `a` and `b` agree with the least change to the known
+    texels (x = x0 - A^T (A A^T)^-1 A x0, A the lookup differences; conjugate gradients on
+    A A^T). Unknown texels stay as they are. In place."""
     if not len(a):
         return
     r = values.shape[0]
     flat = values.reshape(-1, values.shape[2])
     ia, wa = footprint(a, r)
     ib, wb = footprint(b, r)
-    wa, wb = wa * known.reshape(-1)[ia], wb * known.reshape(-1)[ib]  # unknown texels stay
-    idx = np.concatenate([ia.ravel(), ib.ravel()])
-    wts = np.concatenate([wa.ravel(), -wb.ravel()])
-    norm = np.bincount(idx, wts * wts, r * r)
-    scale = np.where(norm > 0, 0.5 / np.where(norm > 0, norm, 1), 0.0)
+    free = known.reshape(-1)
+    idx = np.concatenate([ia, ib], axis=1)                              # (K, 8)
+    wts = np.concatenate([wa * free[ia], -wb * free[ib]], axis=1)      # only known texels move
+
+    def spread(lam):  # A^T lam: (T, C)
+        return np.stack([np.bincount(idx.ravel(), (wts[..., None] * lam[:, None, c:c + 1]).ravel(), r * r)
+                         for c in range(lam.shape[1])], axis=1)
+
+    def apply(z):  # A z: (K, C)
+        return (z[idx] * wts[..., None]).sum(axis=1)
+
+    rhs = lookup(values, a) - lookup(values, b)
+    scale = max(np.abs(flat).max(), 1e-30)
+    lam = np.zeros_like(rhs)
+    res = rhs.copy()
+    direction = res.copy()
+    rho = (res * res).sum(axis=0)
     for _ in range(iterations):
-        d = lookup(values, a) - lookup(values, b)
-        if np.abs(d).max() <= tolerance * max(np.abs(flat).max(), 1e-30):
+        if np.sqrt(rho.max()) <= tolerance * scale:
             break
-        per = np.repeat(np.concatenate([d, d]), 4, axis=0)
-        for ch in range(flat.shape[1]):
-            flat[:, ch] -= scale * np.bincount(idx, wts * per[:, ch], r * r)
+        q = apply(spread(direction)) + 1e-9 * direction
+        alpha = rho / np.maximum((direction * q).sum(axis=0), 1e-300)
+        lam += alpha * direction
+        res -= alpha * q
+        new_rho = (res * res).sum(axis=0)
+        direction = res + (new_rho / np.maximum(rho, 1e-300)) * direction
+        rho = new_rho
+    flat -= spread(lam)
