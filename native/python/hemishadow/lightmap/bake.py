@@ -62,10 +62,11 @@ class _Progress:
             raise Cancelled("lightmap bake cancelled")
 
 
-def _direct(scene, points, ng, lobes, lighting, suns, index, offsets, want_sh, offset, progress):
+def _direct(scene, points, ng, lobes, lighting, suns, index, offsets, want_sh, offset, progress, blocked=None):
     """Direct light (P, L, 3), ao (P,), L1 SH (P, 4, 3) or None, for samples."""
     p = len(points)
-    blocked = cells.unpack(scene.visibility(points, ng, offset=offset))
+    if blocked is None:
+        blocked = cells.unpack(scene.visibility(points, ng, offset=offset))
     t, b = cells.engine_frame(ng)
     maps = np.zeros(lobes.shape[:2] + (3,), np.float32)
     ao = np.ones(p, np.float32)
@@ -79,7 +80,10 @@ def _direct(scene, points, ng, lobes, lighting, suns, index, offsets, want_sh, o
         progress.step(min(_CHUNK, p - start))
     for sun in suns:
         dirs = light.sun_directions(sun, p, index, offsets)
-        lit = light.sun_visibility(scene, points, ng, dirs, offset=offset)
+        lit = np.zeros(p, np.float32)
+        facing = (dirs * ng).sum(1) > 0  # below the horizon: no ray needed
+        if facing.any():
+            lit[facing] = light.sun_visibility(scene, points[facing], ng[facing], dirs[facing], offset=offset)
         m, h = light.sun_light(sun, lit, ng, lobes, dirs, want_sh)
         maps += m
         if want_sh:
@@ -158,12 +162,11 @@ def bake(scene, targets, *, resolution, lighting=None, suns=(), surfaces=(), bou
     receivers = _bounce_receivers(targets, surfaces) if (bounces or _emits(targets, surfaces)) else []
     vertex_count = sum(len(r[1]) for r in receivers)
     steps = _Progress(progress, len(points) + vertex_count * (1 + bounces) + len(points) * bool(receivers))
-    usable = np.linalg.norm(ng, axis=1) > 0.5
-    valid = np.zeros(len(points), bool)
-    if usable.any():
-        valid[usable] = scene.valid(points[usable], ng[usable], offset=offset)
+    usable = np.linalg.norm(ng, axis=1) > 0.5  # zero-area triangles have no normal
     ng_safe = np.where(usable[:, None], ng, n)
-    maps, ao, sh = _direct(scene, points, ng_safe, lobes, lighting, suns, index, offs, want_sh, offset, steps)
+    blocked = cells.unpack(scene.visibility(points, ng_safe, offset=offset))
+    valid = _valid(scene, points, ng_safe, blocked, offset) & usable
+    maps, ao, sh = _direct(scene, points, ng_safe, lobes, lighting, suns, index, offs, want_sh, offset, steps, blocked)
 
     if receivers:
         direct_v = []
@@ -176,7 +179,9 @@ def bake(scene, targets, *, resolution, lighting=None, suns=(), surfaces=(), bou
         radiance = bounce.vertex_radiance(scene, receivers, direct_v, bounces, offset)
         steps.step(vertex_count * bounces)
         if any(r.any() for r in radiance):
-            g = scene.gather(points, ng_safe, bands=bounce.BANDS, offset=offset)
+            texel_id = np.concatenate([g[0].texel + k * max(sizes) ** 2 for k, g in enumerate(geo)])
+            rep, of_sample = _representatives(texel_id, valid)
+            g = scene.gather(points[rep], ng_safe[rep], bands=bounce.BANDS, offset=offset)[of_sample]
             maps += bounce.lobe_irradiance(g, lobes)
             if want_sh:
                 sh += g[:, :4] / np.float32(np.pi)
@@ -193,6 +198,28 @@ def bake(scene, targets, *, resolution, lighting=None, suns=(), surfaces=(), bou
         part = slice(split[k - 1] if k else 0, split[k] if k < len(split) else len(points))
         results.append(_finish(tx, r, values[part], valid[part], tris, uv, names, margin, stitch_seams))
     return results
+
+
+def _valid(scene, points, ng, blocked, offset):
+    """`Scene.valid` where it can be False: a receiver is invalid when back faces cover more
+    than half its disk's cells, so one with at most half its cells blocked is valid."""
+    valid = np.ones(len(points), bool)
+    maybe = blocked.sum(axis=1) > 0.45 * cells.directions().any(axis=1).sum()
+    if maybe.any():
+        valid[maybe] = scene.valid(points[maybe], ng[maybe], offset=offset)
+    return valid
+
+
+def _representatives(texel_id, valid):
+    """One sample per texel (a valid one where there is one) and, per sample, the index of
+    its texel's representative among them: indirect light is gathered once per texel."""
+    order = np.lexsort((~valid, texel_id))
+    first = np.r_[True, texel_id[order][1:] != texel_id[order][:-1]]
+    rep = order[first]
+    group = np.cumsum(first) - 1
+    of_sample = np.empty(len(texel_id), np.int64)
+    of_sample[order] = group
+    return rep, of_sample
 
 
 def _finish(tx, resolution, values, valid, tris, uv, names, margin, stitch_seams):
