@@ -255,6 +255,24 @@ def test_sun_shadow_edge_against_ray_casting():
     assert (around.any(1) & ~around.all(1)).all()  # each lies within 1 cm of the edge
 
 
+def test_sun_rays_see_every_triangle():
+    """The hierarchy's proxies (lod 0.15) shadowed points 0.3 m away from any shadow edge in
+    this scene (a floor, a sphere, a box); sun rays are drawn with every triangle."""
+    v, t, _ = grid_plane(size=6, n=40)
+    ball = trimesh.creation.icosphere(4, 0.8)
+    ball.apply_translation((0.5, 0, 0.8))
+    box = cube([-2, -1, 0], [-1.5, 1, 1.5])
+    scene, _ = scene_of((v, t), (np.asarray(ball.vertices), np.asarray(ball.faces)), box)
+    direction = np.array([0.5, 0.3, 0.8]) / np.linalg.norm([0.5, 0.3, 0.8])
+    y = np.linspace(0.8, 1.3, 201)
+    points = np.stack([np.full_like(y, -2.6), y, 0 * y], 1)
+    ours = lm.light.sun_visibility(scene, points, np.tile([0, 0, 1.0], (len(y), 1)), np.tile(direction, (len(y), 1)))
+    everything = trimesh.util.concatenate([trimesh.Trimesh(v, t), ball, trimesh.Trimesh(*box)])
+    hit = RayMeshIntersector(everything).intersects_any(points + [0, 0, 1e-4], np.tile(direction, (len(y), 1)))
+    assert np.array_equal(ours, (~hit).astype(np.float32))
+    assert scene.lod == pytest.approx(0.15)  # the scene's own setting is left as it was
+
+
 # --- files and input checks -------------------------------------------------------------
 
 

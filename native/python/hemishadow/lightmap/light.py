@@ -10,7 +10,7 @@ The transfer vectors of `Scene.transfer` cannot clip a tilted lobe at the surfac
 Environment: radiance per cell from the lighting rotated into each receiver's frame (fitted
 exactly, band by band, on directions over the sphere). Suns: one exact shadow ray per sample,
 a visibility query whose normal is tilted so that the sun's direction passes through the
-centre of one of the mask's four central cells.
+centre of one of the mask's four central cells, drawn with every triangle (lod 0).
 """
 
 from dataclasses import dataclass
@@ -131,7 +131,12 @@ def sun_visibility(scene, points, ng, directions, offset=None):
     four central cells' mean where no query normal was found, which does not happen for
     unit directions)."""
     q, cell = shadow_normals(directions, ng)
-    blocked = cells.unpack(scene.visibility(points, q, offset=offset))
+    lod = scene.lod
+    scene.lod = 0.0  # every triangle: the hierarchy's proxies cast false sun shadows (docs/lightmaps.md)
+    try:
+        blocked = cells.unpack(scene.visibility(points, q, offset=offset))
+    finally:
+        scene.lod = lod
     found = cell >= 0
     lit = np.where(found, ~blocked[np.arange(len(q)), np.maximum(cell, 0)], False).astype(np.float32)
     if not found.all():
