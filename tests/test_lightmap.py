@@ -119,6 +119,45 @@ def test_box_on_a_plane_darkens_and_invalid_texels_are_filled():
     assert out["flat"][inside, 0].max() <= out["flat"][near, 0].max() + 1e-6
 
 
+def test_environment_occlusion_against_ray_casting():
+    """flat and b0 next to a box under a sky brighter overhead and towards +X, against Embree:
+    uniformly distributed rays over each texel centre's hemisphere, radiance from the same SH."""
+    import reference as ref
+
+    v, t, uv = grid_plane(size=2.0, n=2)
+    box = cube([-0.2, -0.5, 0], [0.2, 0.5, 0.6])
+    scene, (mid, _) = scene_of((v, t), box)
+    sky = uniform_sky(bands=3)
+    sky[2] = 1.2  # Y(1,0): brighter overhead
+    sky[3] = -0.8  # Y(1,1) = -C x: brighter towards +X
+    tan = np.tile([1.0, 0.0, 0.0, 1.0], (len(v), 1))
+    r = 16
+    out = bake(scene, [Target(Surface(mid, v, t), uv, tangents=tan)], resolution=r, lighting=sky, samples=1,
+               bounces=0, margin=0)[0]
+    c = (np.arange(r) + 0.5) / r * 2 - 1
+    x, y = np.meshgrid(c, -c)
+    points = np.stack([x.ravel(), y.ravel(), np.zeros(x.size)], 1)
+    rng = np.random.default_rng(1)
+    n_side = 64
+    u1 = (np.arange(n_side)[:, None] + rng.random((n_side, n_side))) / n_side
+    u2 = (np.arange(n_side)[None, :] + rng.random((n_side, n_side))) / n_side
+    z, phi = u1.ravel(), 2 * math.pi * u2.ravel()
+    dirs = np.stack([np.sqrt(1 - z * z) * np.cos(phi), np.sqrt(1 - z * z) * np.sin(phi), z], 1)  # uniform
+    radiance = ref.sh_basis_reference(dirs, 3) @ sky[:, 0]
+    caster = RayMeshIntersector(trimesh.Trimesh(*box, process=False))
+    origins = np.repeat(points + [0, 0, 1e-4], len(dirs), axis=0)
+    blocked = caster.intersects_any(origins, np.tile(dirs, (len(points), 1))).reshape(len(points), -1)
+    seen = radiance * ~blocked
+    b0 = lm.HL2[0]  # tangent +X, bitangent +Y, normal +Z: the basis as given
+    reference = {"flat": 2 * (seen * dirs[:, 2]).mean(1), "b0": 2 * (seen * np.maximum(dirs @ b0, 0)).mean(1)}
+    valid = out["valid"].ravel()
+    assert valid.sum() > 200
+    for name, expected in reference.items():
+        error = np.abs(out[name][..., 0].ravel() - expected)[valid] / expected[valid]
+        print(name, "relative error: mean", error.mean(), "worst", error.max())
+        assert error.max() < 0.03 and error.mean() < 0.01, name
+
+
 def test_bounces_in_a_closed_emissive_room():
     """A closed room of emission 1 and albedo a: every direction sees walls, so the floor's
     texels hold 1 + a + ... + a^N after N bounces."""
