@@ -1,0 +1,86 @@
+"""addon/lightmaps.py: lightmaps of Blender objects (issue 11), through the engine part.
+
+The add-on module is imported from the repository without registering it (as test_world.py
+does); the scene is built with bpy.
+"""
+
+import math
+import pathlib
+import sys
+
+import numpy as np
+import pytest
+
+bpy = pytest.importorskip("bpy")
+import hemishadow.lightmap as lm  # noqa: E402
+
+ROOT = pathlib.Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT))
+from addon import lightmaps, world  # noqa: E402
+
+
+@pytest.fixture
+def scene():
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    world.clear_cache()
+    scene = bpy.context.scene
+    scene.world = bpy.data.worlds.new("World")
+    scene.world.use_nodes = True
+    background = scene.world.node_tree.nodes["Background"]
+    background.inputs["Color"].default_value = (1, 1, 1, 1)
+    background.inputs["Strength"].default_value = 1.0
+    return scene
+
+
+def plane(name="Floor", size=4.0, uv="lightmap"):
+    bpy.ops.mesh.primitive_plane_add(size=size)
+    obj = bpy.context.active_object
+    obj.name = name
+    if uv:
+        obj.data.uv_layers.new(name=uv)  # a copy of the active UV map: the unit square
+    return obj
+
+
+def test_open_plane_under_a_white_world(scene, tmp_path):
+    floor = plane()
+    paths = lightmaps.bake_lightmaps(scene, [floor], resolution=16, bounces=0, out_dir=str(tmp_path))
+    assert paths == {"Floor": str(tmp_path / "Floor.exr")}
+    maps = lm.read_exr(paths["Floor"])
+    assert np.abs(maps["flat"] - 1).max() < 2e-3  # the World's SH (25 coefficients) of a uniform sky
+    for name in ("b0", "b1", "b2"):
+        assert np.abs(maps[name] - (1 + 1 / math.sqrt(3)) / 2).max() < 2e-3
+    image = bpy.data.images["hemishadow_Floor_flat"]
+    assert tuple(image.size) == (16, 16) and image.is_float
+    pixels = np.array(image.pixels).reshape(16, 16, 4)
+    assert np.abs(pixels[..., :3] - 1).max() < 2e-3
+
+
+def test_sun_and_a_blocker_cast_a_shadow(scene, tmp_path):
+    floor = plane()
+    bpy.ops.mesh.primitive_cube_add(size=1.0, location=(0, 0, 1.0))  # a blocker, not baked
+    bpy.ops.object.light_add(type="SUN", rotation=(0, 0, 0))  # straight down
+    sun = bpy.context.active_object
+    sun.data.energy = math.pi
+    sun.data.angle = 0.0
+    scene.world.node_tree.nodes["Background"].inputs["Strength"].default_value = 0.0
+    maps = lm.read_exr(lightmaps.bake_lightmaps(scene, [floor], resolution=16, bounces=0,
+                                                out_dir=str(tmp_path))["Floor"])
+    flat = maps["flat"][..., 0]
+    # texel centres at +-(0.125 .. 1.875) m: the cube's shadow covers |x|, |y| < 0.5
+    c = ((np.arange(16) + 0.5) / 16 - 0.5) * 4
+    shadowed = (np.abs(c)[:, None] < 0.45) & (np.abs(c)[None, :] < 0.45)
+    lit = (np.abs(c)[:, None] > 0.6) | (np.abs(c)[None, :] > 0.6)
+    assert flat[shadowed].max() < 1e-3 and np.abs(flat[lit] - 1).max() < 1e-3
+
+
+def test_missing_uv_map_names_the_object(scene):
+    floor = plane(uv=None)
+    with pytest.raises(ValueError, match="Floor: no UV map named 'lightmap'"):
+        lightmaps.bake_lightmaps(scene, [floor], resolution=8, images=False)
+
+
+def test_user_mesh_is_unchanged(scene, tmp_path):
+    floor = plane()
+    before = (len(floor.data.uv_layers), len(floor.data.vertices), [tuple(v.co) for v in floor.data.vertices])
+    lightmaps.bake_lightmaps(scene, [floor], resolution=8, bounces=1, out_dir=str(tmp_path))
+    assert (len(floor.data.uv_layers), len(floor.data.vertices), [tuple(v.co) for v in floor.data.vertices]) == before
