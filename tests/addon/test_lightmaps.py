@@ -84,3 +84,19 @@ def test_user_mesh_is_unchanged(scene, tmp_path):
     before = (len(floor.data.uv_layers), len(floor.data.vertices), [tuple(v.co) for v in floor.data.vertices])
     lightmaps.bake_lightmaps(scene, [floor], resolution=8, bounces=1, out_dir=str(tmp_path))
     assert (len(floor.data.uv_layers), len(floor.data.vertices), [tuple(v.co) for v in floor.data.vertices]) == before
+
+
+def test_operator_bakes_the_selected_objects(scene, tmp_path):
+    import addon
+
+    addon.register()
+    try:
+        floor = plane()
+        floor.select_set(True)
+        bpy.context.view_layer.objects.active = floor
+        result = bpy.ops.hemishadow.bake_lightmaps(resolution=8, bounces=0, directory=str(tmp_path))
+        assert result == {"FINISHED"}
+        assert (tmp_path / "Floor.exr").is_file()
+        assert np.abs(lm.read_exr(tmp_path / "Floor.exr")["flat"] - 1).max() < 2e-3
+    finally:
+        addon.unregister()
