@@ -71,6 +71,19 @@ def test_open_plane_under_a_uniform_sky(tangents):
     assert np.abs(out["ao"] - 1.0).max() < 1e-4
 
 
+@pytest.mark.parametrize("matrix", [np.diag([-1.0, 1, 1, 1]), np.diag([2.0, 0.5, 1, 1])], ids=["mirrored", "scaled"])
+def test_placed_instances_keep_their_facing(matrix):
+    """Normals go through the inverse transpose: a mirrored or stretched plane still faces up."""
+    v, t, uv = grid_plane()
+    scene = hemishadow.Scene()
+    mid = scene.add_mesh(v, t)
+    scene.add_instance(mid, matrix)
+    tan = np.tile([1.0, 0.0, 0.0, 1.0], (len(v), 1))
+    out = bake(scene, [Target(Surface(mid, v, t, matrix), uv, tangents=tan)], resolution=8, lighting=uniform_sky(),
+               bounces=1)[0]
+    assert out["valid"].all() and np.abs(out["flat"] - 1).max() < 2e-4 and np.abs(out["b0"] - B_OPEN).max() < 2e-4
+
+
 def test_hl2_lobes_follow_the_tangent_frame():
     """A sun straight along b0 (in the texel's tangent frame) gives b0 its full strength and
     b1, b2 (orthogonal to b0) nothing: the basis is in Valve's order, in the tangent frame."""
@@ -369,3 +382,24 @@ def test_cancel_raises_and_returns_nothing():
     scene, (mid,) = scene_of((v, t))
     with pytest.raises(hemishadow.Cancelled):
         bake(scene, [Target(Surface(mid, v, t), uv)], resolution=8, lighting=uniform_sky(), progress=lambda f: False)
+
+
+def test_rgbm_and_logluv_round_trip(tmp_path):
+    from PIL import Image
+
+    from hemishadow.lightmap import encode
+
+    rng = np.random.default_rng(3)
+    hdr = np.exp(rng.uniform(np.log(1e-2), np.log(6.0), (32, 32, 3))).astype(np.float32)
+    rgbm = encode.rgbm_decode(encode.rgbm_encode(hdr))
+    # 8 bits of a shared multiplier: error below half a step of the multiplier's range
+    assert (np.abs(rgbm - hdr) / np.maximum(hdr.max(-1, keepdims=True), 1e-3)).max() < 0.01
+    luv = encode.logluv_decode(encode.logluv_encode(hdr))
+    luminance = lambda c: (c @ encode.LOGLUV_M)[..., 1]  # noqa: E731  (the Y that LogLuv stores in 16 bits)
+    assert (np.abs(luminance(luv) / luminance(hdr) - 1)).max() < 0.005
+    assert (np.abs(luv - hdr) / hdr.max(-1, keepdims=True)).max() < 0.05
+    path = tmp_path / "flat_rgbm.png"
+    encoded = encode.rgbm_encode(hdr)
+    encode.write_png(path, encoded)
+    with Image.open(path) as image:
+        assert image.mode == "RGBA" and np.array_equal(np.asarray(image), encoded)
