@@ -100,3 +100,20 @@ def test_operator_bakes_the_selected_objects(scene, tmp_path):
         assert np.abs(lm.read_exr(tmp_path / "Floor.exr")["flat"] - 1).max() < 2e-3
     finally:
         addon.unregister()
+
+
+def test_command_line(scene, tmp_path, capsys):
+    from addon import cli
+
+    plane()
+    plane("Bare", uv=None)
+    assert cli.main(["lightmaps", "--objects", "Floor", "--resolution", "8", "--bounces", "0", "--basis", "sh",
+                     "--out", str(tmp_path)]) == 0
+    maps = lm.read_exr(tmp_path / "Floor.exr")
+    assert set(maps) == {"flat", "sh0", "sh1", "sh2", "sh3", "ao", "coverage"}
+    assert np.abs(maps["flat"] - 1).max() < 2e-3
+    assert cli.main(["lightmaps", "--objects", "Nope", "--out", str(tmp_path)]) == 2
+    assert cli.main(["lightmaps", "--objects", "Bare", "--out", str(tmp_path)]) == 1
+    assert "Bare: no UV map named 'lightmap'" in capsys.readouterr().err
+    assert cli.main(["lightmaps", "--resolution", "0", "--objects", "Floor", "--out", str(tmp_path)]) == 1
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["Floor.exr"]  # nothing else written
