@@ -62,18 +62,20 @@ class _Progress:
             raise Cancelled("lightmap bake cancelled")
 
 
-def _direct(scene, points, ng, lobes, lighting, suns, index, offsets, want_sh, offset, progress, blocked=None):
-    """Direct light (P, L, 3), ao (P,), L1 SH (P, 4, 3) or None, for samples."""
+def _direct(scene, points, ng, lobes, lighting, suns, index, offsets, want_sh, offset, progress, masks=None):
+    """Direct light (P, L, 3), ao (P,), L1 SH (P, 4, 3) or None, for samples; `masks` (P, 16)
+    are their raw visibility masks when already known (unpacked a chunk at a time: 1 KiB a
+    sample unpacked, 128 bytes packed)."""
     p = len(points)
-    if blocked is None:
-        blocked = cells.unpack(scene.visibility(points, ng, offset=offset))
+    if masks is None:
+        masks = scene.visibility(points, ng, offset=offset)
     t, b = cells.engine_frame(ng)
     maps = np.zeros(lobes.shape[:2] + (3,), np.float32)
     ao = np.ones(p, np.float32)
     sh = np.zeros((p, 4, 3), np.float32) if want_sh else None
     for start in range(0, p, _CHUNK):
         s = slice(start, start + _CHUNK)
-        m, a, h = light.environment(blocked[s], t[s], b[s], ng[s], lobes[s], lighting, want_sh)
+        m, a, h = light.environment(cells.unpack(masks[s]), t[s], b[s], ng[s], lobes[s], lighting, want_sh)
         maps[s], ao[s] = m, a
         if want_sh:
             sh[s] = h
@@ -164,9 +166,9 @@ def bake(scene, targets, *, resolution, lighting=None, suns=(), surfaces=(), bou
     steps = _Progress(progress, len(points) + vertex_count * (1 + bounces) + len(points) * bool(receivers))
     usable = np.linalg.norm(ng, axis=1) > 0.5  # zero-area triangles have no normal
     ng_safe = np.where(usable[:, None], ng, n)
-    blocked = cells.unpack(scene.visibility(points, ng_safe, offset=offset))
-    valid = _valid(scene, points, ng_safe, blocked, offset) & usable
-    maps, ao, sh = _direct(scene, points, ng_safe, lobes, lighting, suns, index, offs, want_sh, offset, steps, blocked)
+    masks = scene.visibility(points, ng_safe, offset=offset)
+    valid = _valid(scene, points, ng_safe, masks, offset) & usable
+    maps, ao, sh = _direct(scene, points, ng_safe, lobes, lighting, suns, index, offs, want_sh, offset, steps, masks)
 
     if receivers:
         direct_v = []
@@ -200,11 +202,11 @@ def bake(scene, targets, *, resolution, lighting=None, suns=(), surfaces=(), bou
     return results
 
 
-def _valid(scene, points, ng, blocked, offset):
+def _valid(scene, points, ng, masks, offset):
     """`Scene.valid` where it can be False: a receiver is invalid when back faces cover more
     than half its disk's cells, so one with at most half its cells blocked is valid."""
     valid = np.ones(len(points), bool)
-    maybe = blocked.sum(axis=1) > 0.45 * cells.directions().any(axis=1).sum()
+    maybe = np.bitwise_count(masks).sum(axis=1) > 0.45 * cells.directions().any(axis=1).sum()
     if maybe.any():
         valid[maybe] = scene.valid(points[maybe], ng[maybe], offset=offset)
     return valid
