@@ -62,7 +62,8 @@ class _Progress:
             raise Cancelled("lightmap bake cancelled")
 
 
-def _direct(scene, points, ng, lobes, lighting, suns, index, offsets, want_sh, offset, progress, masks=None):
+def _direct(scene, points, ng, lobes, lighting, suns, index, offsets, want_sh, offset, progress, masks=None,
+            exact_suns=True):
     """Direct light (P, L, 3), ao (P,), L1 SH (P, 4, 3) or None, for samples; `masks` (P, 16)
     are their raw visibility masks when already known (unpacked a chunk at a time: 1 KiB a
     sample unpacked, 128 bytes packed)."""
@@ -85,7 +86,8 @@ def _direct(scene, points, ng, lobes, lighting, suns, index, offsets, want_sh, o
         lit = np.zeros(p, np.float32)
         facing = (dirs * ng).sum(1) > 0  # below the horizon: no ray needed
         if facing.any():
-            lit[facing] = light.sun_visibility(scene, points[facing], ng[facing], dirs[facing], offset=offset)
+            lit[facing] = light.sun_visibility(scene, points[facing], ng[facing], dirs[facing], offset=offset,
+                                               exact=exact_suns)
         m, h = light.sun_light(sun, lit, ng, lobes, dirs, want_sh)
         maps += m
         if want_sh:
@@ -175,8 +177,9 @@ def bake(scene, targets, *, resolution, lighting=None, suns=(), surfaces=(), bou
         for mesh_id, pts, nrm, ok, _, _ in receivers:
             d = np.zeros((len(pts), 3), np.float32)
             if ok.any():
+                # bounce light is soft: the proxies' sun shadows do (lod 0 costs 4x and more)
                 d[ok] = _direct(scene, pts[ok], nrm[ok], nrm[ok][:, None], lighting, suns,
-                                np.zeros(ok.sum(), np.int64), offs, False, offset, steps)[0][:, 0]
+                                np.zeros(ok.sum(), np.int64), offs, False, offset, steps, exact_suns=False)[0][:, 0]
             direct_v.append(d)
         radiance = bounce.vertex_radiance(scene, receivers, direct_v, bounces, offset)
         steps.step(vertex_count * bounces)

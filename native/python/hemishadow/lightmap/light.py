@@ -126,13 +126,14 @@ def engine_frame_f32(q):
     return t, b
 
 
-def sun_visibility(scene, points, ng, directions, offset=None):
+def sun_visibility(scene, points, ng, directions, offset=None, exact=True):
     """1.0 where the ray from each point towards `directions` (P, 3) is open, else 0.0 (the
     four central cells' mean where no query normal was found, which does not happen for
-    unit directions)."""
+    unit directions). exact: with every triangle (lod 0); else with the scene's proxies."""
     q, cell = shadow_normals(directions, ng)
     lod = scene.lod
-    scene.lod = 0.0  # every triangle: the hierarchy's proxies cast false sun shadows (docs/lightmaps.md)
+    if exact:
+        scene.lod = 0.0  # every triangle: the hierarchy's proxies cast false sun shadows (docs/lightmaps.md)
     try:
         blocked = cells.unpack(scene.visibility(points, q, offset=offset))
     finally:
