@@ -137,26 +137,17 @@ def bake(scene, targets, *, resolution, lighting=None, suns=(), surfaces=(), bou
     progress: None or a callable taking the fraction done; returning False raises
         `hemishadow.Cancelled` and nothing is returned.
     """
-    if basis not in BASES:
-        raise ValueError(f"basis must be one of {BASES}, got {basis!r}")
-    targets = list(targets)
-    if not targets:
-        raise ValueError("no targets to bake")
-    if isinstance(resolution, (list, tuple, np.ndarray)):
-        if len(resolution) != len(targets):
-            raise ValueError(f"{len(resolution)} resolutions for {len(targets)} targets")
-        sizes = [_positive_int(r, "resolution") for r in resolution]
-    else:
-        sizes = [_positive_int(resolution, "resolution")] * len(targets)
+    targets, sizes = _targets_and_sizes(targets, resolution)
     samples = _positive_int(samples, "samples")
     margin = _positive_int(margin, "margin", 0)
     bounces = _positive_int(bounces, "bounces", 0)
+    if basis not in BASES:
+        raise ValueError(f"basis must be one of {BASES}, got {basis!r}")
     lighting, suns = _lighting(lighting), _suns(suns)
     want_sh = basis == "sh"
     offs = texels.offsets(samples)
 
     geo = [_sample_geometry(tg, r, samples) for tg, r in zip(targets, sizes)]
-    split = np.cumsum([len(g[0].texel) for g in geo])[:-1]
     points = np.concatenate([g[1] for g in geo])
     ng = np.concatenate([g[2] for g in geo])
     t, b, n = (np.concatenate([g[3][k] for g in geo]) for k in range(3))
@@ -167,42 +158,56 @@ def bake(scene, targets, *, resolution, lighting=None, suns=(), surfaces=(), bou
     vertex_count = sum(len(r[1]) for r in receivers)
     steps = _Progress(progress, len(points) + vertex_count * (1 + bounces) + len(points) * bool(receivers))
     usable = np.linalg.norm(ng, axis=1) > 0.5  # zero-area triangles have no normal
-    ng_safe = np.where(usable[:, None], ng, n)
-    masks = scene.visibility(points, ng_safe, offset=offset)
-    valid = _valid(scene, points, ng_safe, masks, offset) & usable
-    maps, ao, sh = _direct(scene, points, ng_safe, lobes, lighting, suns, index, offs, want_sh, offset, steps, masks)
-
+    ng = np.where(usable[:, None], ng, n)
+    masks = scene.visibility(points, ng, offset=offset)
+    valid = _valid(scene, points, ng, masks, offset) & usable
+    maps, ao, sh = _direct(scene, points, ng, lobes, lighting, suns, index, offs, want_sh, offset, steps, masks)
     if receivers:
-        direct_v = []
-        for mesh_id, pts, nrm, ok, _, _ in receivers:
-            d = np.zeros((len(pts), 3), np.float32)
-            if ok.any():
-                # bounce light is soft: the proxies' sun shadows do (lod 0 costs 4x and more)
-                d[ok] = _direct(scene, pts[ok], nrm[ok], nrm[ok][:, None], lighting, suns,
-                                np.zeros(ok.sum(), np.int64), offs, False, offset, steps, exact_suns=False)[0][:, 0]
-            direct_v.append(d)
-        radiance = bounce.vertex_radiance(scene, receivers, direct_v, bounces, offset)
-        steps.step(vertex_count * bounces)
-        if any(r.any() for r in radiance):
-            texel_id = np.concatenate([g[0].texel + k * max(sizes) ** 2 for k, g in enumerate(geo)])
-            rep, of_sample = _representatives(texel_id, valid)
-            g = scene.gather(points[rep], ng_safe[rep], bands=bounce.BANDS, offset=offset)[of_sample]
-            maps += bounce.lobe_irradiance(g, lobes)
+        texel_id = np.concatenate([g[0].texel + k * max(sizes) ** 2 for k, g in enumerate(geo)])
+        gathered = _indirect(scene, receivers, points, ng, valid, texel_id, lighting, suns, offs, bounces, offset, steps)
+        if gathered is not None:
+            maps += bounce.lobe_irradiance(gathered, lobes)
             if want_sh:
-                sh += g[:, :4] / np.float32(np.pi)
+                sh += gathered[:, :4] / np.float32(np.pi)
         steps.step(len(points))
 
     names = ["flat"] + (["b0", "b1", "b2"] if basis == "hl2" else []) + (["sh0", "sh1", "sh2", "sh3"] if want_sh else [])
-    columns = [maps.reshape(len(points), -1)]
-    if want_sh:
-        columns.append(sh.reshape(len(points), -1))
-    columns.append(ao[:, None])
-    values = np.concatenate(columns, axis=1)
-    results = []
-    for k, (tg, r, (tx, *_rest, tris, uv)) in enumerate(zip(targets, sizes, geo)):
-        part = slice(split[k - 1] if k else 0, split[k] if k < len(split) else len(points))
-        results.append(_finish(tx, r, values[part], valid[part], tris, uv, names, margin, stitch_seams))
-    return results
+    values = np.concatenate([maps.reshape(len(points), -1)] + ([sh.reshape(len(points), -1)] if want_sh else [])
+                            + [ao[:, None]], axis=1)
+    ends = np.cumsum([len(g[0].texel) for g in geo])
+    return [_finish(tx, r, values[end - len(tx.texel):end], valid[end - len(tx.texel):end], tris, uv, names, margin,
+                    stitch_seams)
+            for r, (tx, *_rest, tris, uv), end in zip(sizes, geo, ends)]
+
+
+def _targets_and_sizes(targets, resolution):
+    targets = list(targets)
+    if not targets:
+        raise ValueError("no targets to bake")
+    if isinstance(resolution, (list, tuple, np.ndarray)):
+        if len(resolution) != len(targets):
+            raise ValueError(f"{len(resolution)} resolutions for {len(targets)} targets")
+        return targets, [_positive_int(r, "resolution") for r in resolution]
+    return targets, [_positive_int(resolution, "resolution")] * len(targets)
+
+
+def _indirect(scene, receivers, points, ng, valid, texel_id, lighting, suns, offsets, bounces, offset, steps):
+    """Gathered SH (P, 9, 3) of the light the samples receive from the surfaces after
+    `bounces` passes, gathered once per texel; None when every surface is black."""
+    direct = []
+    for mesh_id, pts, nrm, ok, _, _ in receivers:
+        d = np.zeros((len(pts), 3), np.float32)
+        if ok.any():
+            # bounce light is soft: the proxies' sun shadows do (lod 0 costs 4x and more)
+            d[ok] = _direct(scene, pts[ok], nrm[ok], nrm[ok][:, None], lighting, suns, np.zeros(ok.sum(), np.int64),
+                            offsets, False, offset, steps, exact_suns=False)[0][:, 0]
+        direct.append(d)
+    radiance = bounce.vertex_radiance(scene, receivers, direct, bounces, offset)
+    steps.step(sum(len(r[1]) for r in receivers) * bounces)
+    if not any(r.any() for r in radiance):
+        return None
+    rep, of_sample = _representatives(texel_id, valid)
+    return scene.gather(points[rep], ng[rep], bands=bounce.BANDS, offset=offset)[of_sample]
 
 
 def _valid(scene, points, ng, masks, offset):
