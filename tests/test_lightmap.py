@@ -307,6 +307,26 @@ def test_sun_shadow_edge_against_ray_casting():
     assert (around.any(1) & ~around.all(1)).all()  # each lies within 1 cm of the edge
 
 
+def test_adaptive_sun_rays_match_a_ray_per_sample(monkeypatch):
+    """One ray per texel first, per sample only around shadow edges: the same map as a ray per
+    sample here, for far fewer rays."""
+    v, t, uv = grid_plane(n=8)
+    wall = cube([-0.15, -0.6, 0], [0.15, 0.6, 0.7])
+    scene, (mid, _) = scene_of((v, t), wall)
+    rays = []
+    original = lm.light.sun_visibility
+    monkeypatch.setattr(lm.light, "sun_visibility", lambda s, p, *a, **k: rays.append(len(p)) or original(s, p, *a, **k))
+    maps = {}
+    for adaptive in (False, True):
+        rays.clear()
+        out = bake(scene, [Target(Surface(mid, v, t), uv)], resolution=32, suns=[Sun((0.8, 0.25, 0.6), math.pi)],
+                   samples=9, bounces=0, adaptive_suns=adaptive)[0]
+        maps[adaptive] = (out["flat"], sum(rays))
+    print("sun rays: per sample", maps[False][1], "adaptive", maps[True][1])
+    assert np.abs(maps[True][0] - maps[False][0]).max() < 1e-6
+    assert maps[True][1] < 0.35 * maps[False][1]
+
+
 def test_sun_rays_see_every_triangle():
     """The hierarchy's proxies (lod 0.15) shadowed points 0.3 m away from any shadow edge in
     this scene (a floor, a sphere, a box); sun rays are drawn with every triangle."""

@@ -63,10 +63,11 @@ class _Progress:
 
 
 def _direct(scene, points, ng, lobes, lighting, suns, index, offsets, want_sh, offset, progress, masks=None,
-            exact_suns=True):
+            exact_suns=True, texel_grid=None):
     """Direct light (P, L, 3), ao (P,), L1 SH (P, 4, 3) or None, for samples; `masks` (P, 16)
     are their raw visibility masks when already known (unpacked a chunk at a time: 1 KiB a
-    sample unpacked, 128 bytes packed)."""
+    sample unpacked, 128 bytes packed). texel_grid: (texel ids (P,), grid shape (T, R, R))
+    for adaptive sun rays (`_sun_lit`), None for a ray per sample."""
     p = len(points)
     if masks is None:
         masks = scene.visibility(points, ng, offset=offset)
@@ -85,7 +86,10 @@ def _direct(scene, points, ng, lobes, lighting, suns, index, offsets, want_sh, o
         dirs = light.sun_directions(sun, p, index, offsets)
         lit = np.zeros(p, np.float32)
         facing = (dirs * ng).sum(1) > 0  # below the horizon: no ray needed
-        if facing.any():
+        if facing.any() and texel_grid is not None:
+            lit[facing] = _sun_lit(scene, points[facing], ng[facing], dirs[facing], texel_grid[0][facing],
+                                   texel_grid[1], offset)
+        elif facing.any():
             lit[facing] = light.sun_visibility(scene, points[facing], ng[facing], dirs[facing], offset=offset,
                                                exact=exact_suns)
         m, h = light.sun_light(sun, lit, ng, lobes, dirs, want_sh)
@@ -93,6 +97,31 @@ def _direct(scene, points, ng, lobes, lighting, suns, index, offsets, want_sh, o
         if want_sh:
             sh += h
     return maps, ao, sh
+
+
+def _sun_lit(scene, points, ng, dirs, texel_id, shape, offset):
+    """Sun visibility per sample, adaptively (as VRAD refines luxels): one ray per texel
+    first; every sample of a texel gets a ray of its own only where that texel or one of its
+    8 neighbours disagrees. A shadow thinner than a texel that falls between the first rays
+    can be missed."""
+    rep, of_sample = _representatives(texel_id, np.ones(len(texel_id), bool))
+    first = light.sun_visibility(scene, points[rep], ng[rep], dirs[rep], offset=offset)
+    grid = np.full(int(np.prod(shape)), -1, np.int8)
+    grid[texel_id[rep]] = first.astype(np.int8)
+    grid = grid.reshape(shape)
+    padded = np.pad(grid, ((0, 0), (1, 1), (1, 1)), constant_values=-1)
+    mixed = np.zeros(shape, bool)
+    r = shape[1]
+    for dy in (0, 1, 2):
+        for dx in (0, 1, 2):
+            other = padded[:, dy:dy + r, dx:dx + r]
+            mixed |= (other >= 0) & (grid >= 0) & (other != grid)
+    lit = first[of_sample]
+    redo = mixed.reshape(-1)[texel_id]
+    redo[rep] = False
+    if redo.any():
+        lit[redo] = light.sun_visibility(scene, points[redo], ng[redo], dirs[redo], offset=offset)
+    return lit
 
 
 def _sample_geometry(target, resolution, samples):
@@ -121,7 +150,7 @@ def _texel_maps(tx, resolution, values, valid):
 
 
 def bake(scene, targets, *, resolution, lighting=None, suns=(), surfaces=(), bounces=2, samples=4, margin=2,
-         basis="hl2", offset=None, stitch_seams=True, progress=None):
+         basis="hl2", offset=None, stitch_seams=True, adaptive_suns=True, progress=None):
     """Bakes lightmaps of `targets` (`Target`s) in `scene` (a `hemishadow.Scene` holding every
     blocker); returns one dict of maps per target (see the module docstring).
 
@@ -134,6 +163,8 @@ def bake(scene, targets, *, resolution, lighting=None, suns=(), surfaces=(), bou
     bounces: diffuse bounces (0: direct light only). samples: supersamples per texel, in total.
     margin: texels of padding around islands. basis: "hl2" (flat, b0-b2, ao), "sh" (flat,
         sh0-sh3, ao) or "flat" (flat, ao). offset: the receivers' lift (`Scene`'s default).
+    adaptive_suns: a sun ray per texel first, then per sample where neighbours disagree
+        (`_sun_lit`); False: a ray per sample. stitch_seams: match texels across UV seams.
     progress: None or a callable taking the fraction done; returning False raises
         `hemishadow.Cancelled` and nothing is returned.
     """
@@ -161,9 +192,13 @@ def bake(scene, targets, *, resolution, lighting=None, suns=(), surfaces=(), bou
     ng = np.where(usable[:, None], ng, n)
     masks = scene.visibility(points, ng, offset=offset)
     valid = _valid(scene, points, ng, masks, offset) & usable
-    maps, ao, sh = _direct(scene, points, ng, lobes, lighting, suns, index, offs, want_sh, offset, steps, masks)
+    r = max(sizes)
+    texel_id = np.concatenate([(k * r + g[0].texel // sz) * r + g[0].texel % sz
+                               for k, (g, sz) in enumerate(zip(geo, sizes))])  # (target, row, col) in a T x r x r grid
+    grid = (texel_id, (len(geo), r, r)) if adaptive_suns else None
+    maps, ao, sh = _direct(scene, points, ng, lobes, lighting, suns, index, offs, want_sh, offset, steps, masks,
+                           texel_grid=grid)
     if receivers:
-        texel_id = np.concatenate([g[0].texel + k * max(sizes) ** 2 for k, g in enumerate(geo)])
         gathered = _indirect(scene, receivers, points, ng, valid, texel_id, lighting, suns, offs, bounces, offset, steps)
         if gathered is not None:
             maps += bounce.lobe_irradiance(gathered, lobes)
