@@ -4,7 +4,11 @@ margin and diffuse bounces. Prints the mean and worst relative error of `flat` o
 texels brighter than 1 % of the open-sky value, and both times.
 
     PYTHONPATH=native/python .venv/bin/python bench/lightmap_cycles.py [--resolution 32]
-        [--samples 1024] [--bounces 0] [--no-sun]
+        [--samples 1024] [--bounces 0] [--no-sun] [--cuts N] [--map flat|b0|b1|b2]
+
+For a `b_i` map, the floor's material gets a Normal Map node (tangent space, the floor's
+render UV map) fed the constant colour (b_i + 1) / 2, with bump-map correction off; only the
+floor has it (a material of its own), so compare b_i with --bounces 0.
 """
 
 import argparse
@@ -23,7 +27,7 @@ from addon import lightmaps, world  # noqa: E402
 import hemishadow.lightmap as lm  # noqa: E402
 
 
-def build(sun, cuts=0):
+def build(sun, cuts=0, basis_vector=None):
     bpy.ops.wm.read_factory_settings(use_empty=True)
     world.clear_cache()
     scene = bpy.context.scene
@@ -41,7 +45,7 @@ def build(sun, cuts=0):
     floor = bpy.context.active_object
     floor.name = "Floor"
     floor.data.uv_layers.new(name="lightmap")
-    floor.data.materials.append(material)
+    floor.data.materials.append(_basis_material(material, basis_vector) if basis_vector is not None else material)
     bpy.ops.mesh.primitive_cube_add(size=1.0, location=(0.3, 0.2, 0.5))
     cube = bpy.context.active_object
     cube.data.materials.append(material)
@@ -58,7 +62,21 @@ def build(sun, cuts=0):
         bpy.ops.object.light_add(type="SUN", rotation=(math.radians(40), 0, math.radians(30)))
         bpy.context.active_object.data.energy = 3.0
         bpy.context.active_object.data.angle = math.radians(1.0)
-    return scene, floor, material
+    return scene, floor, floor.data.materials[0]
+
+
+def _basis_material(material, vector):
+    """A copy of `material` whose shading normal is `vector` in the tangent frame."""
+    mat = material.copy()
+    mat.name = "Basis"
+    mat.cycles.use_bump_map_correction = False  # on, even an open plane bakes 0.633, not 0.789
+    nodes = mat.node_tree.nodes
+    normal_map = nodes.new("ShaderNodeNormalMap")
+    normal_map.space = "TANGENT"
+    normal_map.uv_map = "UVMap"
+    normal_map.inputs["Color"].default_value = (*((np.asarray(vector) + 1) / 2), 1.0)
+    mat.node_tree.links.new(normal_map.outputs["Normal"], nodes["Principled BSDF"].inputs["Normal"])
+    return mat
 
 
 def cycles_bake(scene, floor, material, resolution, samples, bounces, margin):
@@ -90,11 +108,14 @@ def main(argv=None):
     parser.add_argument("--bounces", type=int, default=0)
     parser.add_argument("--no-sun", action="store_true")
     parser.add_argument("--cuts", type=int, default=0, help="subdivide the floor and the box (edge cuts)")
+    parser.add_argument("--map", choices=("flat", "b0", "b1", "b2"), default="flat")
     args = parser.parse_args(argv)
-    scene, floor, material = build(not args.no_sun, args.cuts)
+    vector = None if args.map == "flat" else lm.HL2[int(args.map[1])]
+    scene, floor, material = build(not args.no_sun, args.cuts, vector)
     with tempfile.TemporaryDirectory() as folder:
         t0 = time.perf_counter()
-        ours = lm.read_exr(lightmaps.bake_lightmaps(scene, [floor], resolution=args.resolution, basis="flat",
+        ours = lm.read_exr(lightmaps.bake_lightmaps(scene, [floor], resolution=args.resolution,
+                                                    basis="flat" if args.map == "flat" else "hl2",
                                                     bounces=args.bounces, samples=4, margin=2, out_dir=folder,
                                                     images=False)["Floor"])
         ours_seconds = time.perf_counter() - t0
@@ -109,8 +130,8 @@ def main(argv=None):
     for dy in (0, 1, 2):
         for dx in (0, 1, 2):
             clear &= padded[dy:dy + bright.shape[0], dx:dx + bright.shape[1]]
-    relative = np.abs(ours["flat"] - reference).mean(-1) / np.maximum(reference.mean(-1), 1e-6)
-    print(f"flat vs Cycles ({args.samples} samples, {args.bounces} bounces, sun={not args.no_sun}, "
+    relative = np.abs(ours[args.map] - reference).mean(-1) / np.maximum(reference.mean(-1), 1e-6)
+    print(f"{args.map} vs Cycles ({args.samples} samples, {args.bounces} bounces, sun={not args.no_sun}, "
           f"cuts={args.cuts}); "
           f"ours {ours_seconds:.2f} s, Cycles {cycles_seconds:.2f} s")
     for label, keep in (("covered, > 1 %", covered & bright), ("away from the box's footprint", covered & clear)):
