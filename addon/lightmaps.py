@@ -34,6 +34,48 @@ class MeshData:
     tangents: np.ndarray | None
 
 
+def make_lightmap_uv(obj, name=DEFAULT_UV, method="LIGHTMAP", margin=0.05):
+    """Adds a NEW UV map `name` to the object's mesh, unwrapped by Lightmap Pack ('LIGHTMAP')
+    or Smart UV Project ('SMART'); the only change made to the mesh: existing UV maps, and
+    which one is active and which renders, stay as they were. Returns the new layer's name.
+    Raises ValueError when `name` exists already (it is never overwritten)."""
+    if obj.type != "MESH":
+        raise ValueError(f"{obj.name}: only mesh objects can have lightmap UVs")
+    mesh = obj.data
+    if name in mesh.uv_layers:
+        raise ValueError(f"{obj.name}: a UV map named {name!r} exists already; it is left as it is")
+    if not len(mesh.polygons):
+        raise ValueError(f"{obj.name}: the mesh has no faces")
+    active = mesh.uv_layers.active.name if mesh.uv_layers.active else None
+    render = next((u.name for u in mesh.uv_layers if u.active_render), None)
+    mesh.uv_layers.active = mesh.uv_layers.new(name=name, do_init=False)
+    view_layer = bpy.context.view_layer
+    previous_active, previous_mode = view_layer.objects.active, obj.mode
+    selected = [o for o in view_layer.objects if o.select_get()]
+    try:
+        for o in selected:
+            o.select_set(False)
+        obj.select_set(True)
+        view_layer.objects.active = obj
+        bpy.ops.object.mode_set(mode="EDIT")
+        bpy.ops.mesh.select_all(action="SELECT")
+        if method == "SMART":
+            bpy.ops.uv.smart_project(island_margin=margin)
+        else:
+            bpy.ops.uv.lightmap_pack(PREF_CONTEXT="ALL_FACES", PREF_MARGIN_DIV=margin)
+        bpy.ops.object.mode_set(mode=previous_mode if previous_mode != "EDIT" else "OBJECT")
+    finally:
+        obj.select_set(False)
+        for o in selected:
+            o.select_set(True)
+        view_layer.objects.active = previous_active
+    if active is not None:
+        mesh.uv_layers.active = mesh.uv_layers[active]
+    if render is not None:
+        mesh.uv_layers[render].active_render = True
+    return name  # (`layer` dangles after Edit Mode: Blender reallocates the layers)
+
+
 def blockers(scene, view_layer=None):
     """Visible, renderable mesh objects of the view layer."""
     layer = view_layer or scene.view_layers[0]
@@ -234,5 +276,6 @@ def bake_lightmaps(scene, objects, *, uv_name=DEFAULT_UV, resolution=256, basis=
                 if name != "valid":
                     image = store_image(f"{IMAGE_PREFIX}{target.name}_{name}", data)
                     if folder is None:
+                        image.file_format = "OPEN_EXR"  # float pixels packed as float
                         image.pack()
     return written

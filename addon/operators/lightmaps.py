@@ -56,4 +56,38 @@ class HEMISHADOW_OT_bake_lightmaps(bpy.types.Operator):
         return {"FINISHED"}
 
 
-classes = (HEMISHADOW_OT_bake_lightmaps,)
+class HEMISHADOW_OT_make_lightmap_uv(bpy.types.Operator):
+    """Add a new UV map for lightmaps to the selected meshes (Lightmap Pack or Smart UV Project); existing UV maps are not touched"""
+
+    bl_idname = "hemishadow.make_lightmap_uv"
+    bl_label = "Make Lightmap UVs"
+    bl_options = {"REGISTER", "UNDO"}
+
+    uv_name: bpy.props.StringProperty(name="UV Map", default=lightmaps.DEFAULT_UV)
+    method: bpy.props.EnumProperty(name="Method", default="LIGHTMAP", items=[
+        ("LIGHTMAP", "Lightmap Pack", "one island per face, packed"),
+        ("SMART", "Smart UV Project", "islands by angle")])
+
+    @classmethod
+    def poll(cls, context):
+        return context.mode == "OBJECT" and any(o.type == "MESH" for o in context.selected_objects)
+
+    def execute(self, context):
+        made, kept = [], []
+        for obj in [o for o in context.selected_objects if o.type == "MESH"]:
+            if self.uv_name in obj.data.uv_layers:
+                kept.append(obj.name)
+                continue
+            try:
+                lightmaps.make_lightmap_uv(obj, self.uv_name, self.method)
+            except ValueError as error:
+                self.report({"ERROR"}, str(error))
+                return {"CANCELLED"}
+            made.append(obj.name)
+        if kept:
+            self.report({"INFO"}, f"already have {self.uv_name!r} (left as is): {', '.join(kept)}")
+        self.report({"INFO"}, f"hemishadow: made {self.uv_name!r} for {len(made)} object(s)")
+        return {"FINISHED"}
+
+
+classes = (HEMISHADOW_OT_bake_lightmaps, HEMISHADOW_OT_make_lightmap_uv)

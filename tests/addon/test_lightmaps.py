@@ -94,6 +94,8 @@ def test_operator_bakes_the_selected_objects(scene, tmp_path):
         floor = plane()
         floor.select_set(True)
         bpy.context.view_layer.objects.active = floor
+        assert bpy.ops.hemishadow.make_lightmap_uv() == {"FINISHED"}  # has one: left as it is
+        assert [u.name for u in floor.data.uv_layers] == ["UVMap", "lightmap"]
         result = bpy.ops.hemishadow.bake_lightmaps(resolution=8, bounces=0, directory=str(tmp_path))
         assert result == {"FINISHED"}
         assert (tmp_path / "Floor.exr").is_file()
@@ -159,3 +161,32 @@ def test_lightmap_node_group_combines_like_source(scene, tmp_path):
     # Cycles' film adds about 1 % here (a grey 0.5 plane comes out 0.497..0.500); unsquared
     # weights (0.527, 0.284, 0.324) or another basis order would be 10 % off or more
     assert np.abs(pixel - expected).max() < 0.015, (pixel, expected)
+
+
+@pytest.mark.parametrize("method", ["LIGHTMAP", "SMART"])
+def test_make_lightmap_uv_adds_a_new_map_only(scene, method):
+    bpy.ops.mesh.primitive_cube_add(size=1.0)
+    cube = bpy.context.active_object
+    mesh = cube.data
+    before = np.empty(len(mesh.loops) * 2, np.float32)
+    mesh.uv_layers["UVMap"].uv.foreach_get("vector", before)
+    assert lightmaps.make_lightmap_uv(cube, method=method) == "lightmap"
+    assert [u.name for u in mesh.uv_layers] == ["UVMap", "lightmap"]
+    assert mesh.uv_layers.active.name == "UVMap" and mesh.uv_layers["UVMap"].active_render
+    after = np.empty_like(before)
+    mesh.uv_layers["UVMap"].uv.foreach_get("vector", after)
+    assert np.array_equal(before, after)
+    new = np.empty_like(before)
+    mesh.uv_layers["lightmap"].uv.foreach_get("vector", new)
+    assert new.min() >= 0 and new.max() <= 1 and np.ptp(new) > 0.5
+    with pytest.raises(ValueError, match="exists already"):
+        lightmaps.make_lightmap_uv(cube, method=method)
+    # and it bakes: islands that do not overlap; with no folder (unsaved .blend) the images are packed
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        maps = lightmaps.bake_lightmaps(scene, [cube], resolution=32, bounces=0)
+    assert maps == {"Cube": None}
+    image = bpy.data.images["hemishadow_Cube_flat"]
+    assert image.packed_file is not None and image.is_float
