@@ -48,7 +48,7 @@ def build_parser() -> argparse.ArgumentParser:
         "  ... bake --help\n"
         "progress goes to stderr; Ctrl-C cancels and saves nothing\n"
         "exit codes: 0 done, 1 the work failed, 2 bad command line, 130 cancelled"))
-    commands = parser.add_subparsers(dest="command", metavar="{compute,bake}", parser_class=_Parser)
+    commands = parser.add_subparsers(dest="command", metavar="{compute,bake,lightmaps}", parser_class=_Parser)
 
     compute = commands.add_parser("compute", help="compute one frame into the attributes",
                                   description="Compute one frame into the attributes hemishadow_radiance and "
@@ -68,6 +68,9 @@ def build_parser() -> argparse.ArgumentParser:
     bake.add_argument("--no-transfer", action="store_true",
                       help="store only radiance and AO, not the transfer vectors (smaller; lighting is then fixed)")
     _add_common(bake)
+    from . import lightmaps_cli
+
+    lightmaps_cli.add_parser(commands)
     return parser
 
 
@@ -86,6 +89,8 @@ def main(argv) -> int:
         if args.command is None:
             raise UsageError(f"{PROG}: error: a command is needed: compute or bake (see --help)")
         scene = _scene(args.scene)
+        if args.command == "lightmaps":
+            return _lightmaps(scene, args)
         objects = _objects(scene, args.objects)
         run = _compute if args.command == "compute" else _bake
         if not run(scene, objects, args):
@@ -208,6 +213,24 @@ def _bake(scene, objects, args) -> bool:
     print(f"hemishadow: baked {count} frames of {len(objects)} object(s) in {time.perf_counter() - t0:.2f} s "
           f"(engine {result.engine_seconds:.2f} s, Blender {result.blender_seconds:.2f} s)")
     return True
+
+
+def _lightmaps(scene, args) -> int:
+    import hemishadow
+
+    from . import lightmaps_cli
+
+    found = lightmaps_cli.objects(scene, args, lambda m: UsageError(f"{PROG}: error: {m}"))
+    bar, interrupts = _progress_bar("lightmaps")
+    with interrupts:
+        try:
+            lightmaps_cli.run(scene, found, args, bar)
+        except hemishadow.Cancelled:
+            print("hemishadow: cancelled (Ctrl-C): nothing written", file=sys.stderr)
+            return 130
+        finally:
+            bar.close()
+    return 0
 
 
 def _save():

@@ -1,11 +1,11 @@
 """Operators, one module per job: live.py (compute, live toggle, clear, material),
-bake.py (bake a frame range to a cache), world.py (precompute World lighting) and jobs.py
-(heavy meshes in the background)."""
+bake.py (bake a frame range to a cache), world.py (precompute World lighting), jobs.py
+(heavy meshes in the background) and lightmaps.py (bake lightmaps)."""
 
 import bpy
 
-from . import bake, jobs, live, world
+from . import bake, jobs, lightmaps, live, world
 
-classes = live.classes + bake.classes + world.classes + jobs.classes
+classes = live.classes + bake.classes + world.classes + jobs.classes + lightmaps.classes
 
 register, unregister = bpy.utils.register_classes_factory(classes)

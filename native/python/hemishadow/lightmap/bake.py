@@ -1,0 +1,308 @@
+"""The lightmap baker's engine part: texels in, maps out (issue 11).
+
+`bake(scene, targets, resolution=...)` returns, per target, float32 maps of the outgoing
+radiance of a white Lambertian surface (irradiance / pi; what Cycles' Diffuse bake gives
+with Direct + Indirect and Color off): `flat` (interpolated shading normal), `b0`, `b1`, `b2`
+(HL2 basis, basis="hl2") or `sh0`..`sh3` (L1 SH of the incident radiance / pi, world space,
+basis="sh"), each (R, R, 3); `ao` (R, R), 1 = open; `coverage` (R, R), 1 where a texel
+centre lies in a UV triangle (before padding); `valid` (R, R), texels with a valid receiver
+before filling. See docs/lightmaps.md.
+"""
+
+import warnings
+
+import numpy as np
+
+from .. import Cancelled
+from . import basis as frames
+from . import bounce, cells, dilate, geometry, light, seams, texels
+from .geometry import Surface, Target
+
+BASES = ("hl2", "sh", "flat")
+_CHUNK = 2048
+
+
+def _positive_int(value, what, minimum=1):
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
+        raise ValueError(f"{what} must be an integer >= {minimum}, got {value!r}")
+    return int(value)
+
+
+def _lighting(lighting):
+    if lighting is None:
+        return None
+    array = geometry.finite(lighting, "lighting", (-1, 3))
+    if len(array) not in (1, 4, 9, 16, 25):
+        raise ValueError(f"lighting must have 1, 4, 9, 16 or 25 SH coefficients per colour, got {len(array)}")
+    return array.astype(np.float32)
+
+
+def _suns(suns):
+    out = []
+    for i, sun in enumerate(suns):
+        d = geometry.finite(sun.direction, f"sun {i}: direction", (3,))
+        if not np.linalg.norm(d) > 0:
+            raise ValueError(f"sun {i}: direction is zero")
+        strength = np.asarray(sun.strength, dtype=np.float64)
+        if strength.size not in (1, 3) or not np.isfinite(strength).all():
+            raise ValueError(f"sun {i}: strength must be a finite number or RGB triple")
+        if not (np.isfinite(sun.angle) and 0 <= sun.angle < np.pi):
+            raise ValueError(f"sun {i}: angle must be in [0, pi) radians, got {sun.angle!r}")
+        out.append(light.Sun(d / np.linalg.norm(d), strength, float(sun.angle)))
+    return out
+
+
+class _Progress:
+    def __init__(self, callback, total):
+        self.callback, self.total, self.done = callback, max(total, 1), 0
+
+    def step(self, amount=1):
+        self.done += amount
+        if self.callback is not None and self.callback(min(self.done / self.total, 1.0)) is False:
+            raise Cancelled("lightmap bake cancelled")
+
+
+def _direct(scene, points, ng, lobes, lighting, suns, index, offsets, want_sh, offset, progress, masks=None,
+            exact_suns=True, texel_grid=None):
+    """Direct light (P, L, 3), ao (P,), L1 SH (P, 4, 3) or None, for samples; `masks` (P, 16)
+    are their raw visibility masks when already known (unpacked a chunk at a time: 1 KiB a
+    sample unpacked, 128 bytes packed). texel_grid: (texel ids (P,), grid shape (T, R, R))
+    for adaptive sun rays (`_sun_lit`), None for a ray per sample."""
+    p = len(points)
+    if masks is None:
+        masks = scene.visibility(points, ng, offset=offset)
+    t, b = cells.engine_frame(ng)
+    maps = np.zeros(lobes.shape[:2] + (3,), np.float32)
+    ao = np.ones(p, np.float32)
+    sh = np.zeros((p, 4, 3), np.float32) if want_sh else None
+    for start in range(0, p, _CHUNK):
+        s = slice(start, start + _CHUNK)
+        m, a, h = light.environment(cells.unpack(masks[s]), t[s], b[s], ng[s], lobes[s], lighting, want_sh)
+        maps[s], ao[s] = m, a
+        if want_sh:
+            sh[s] = h
+        progress.step(min(_CHUNK, p - start))
+    for sun in suns:
+        dirs = light.sun_directions(sun, p, index, offsets)
+        lit = np.zeros(p, np.float32)
+        facing = (dirs * ng).sum(1) > 0  # below the horizon: no ray needed
+        if facing.any() and texel_grid is not None:
+            lit[facing] = _sun_lit(scene, points[facing], ng[facing], dirs[facing], texel_grid[0][facing],
+                                   texel_grid[1], offset)
+        elif facing.any():
+            lit[facing] = light.sun_visibility(scene, points[facing], ng[facing], dirs[facing], offset=offset,
+                                               exact=exact_suns)
+        m, h = light.sun_light(sun, lit, ng, lobes, dirs, want_sh)
+        maps += m
+        if want_sh:
+            sh += h
+    return maps, ao, sh
+
+
+def _sun_lit(scene, points, ng, dirs, texel_id, shape, offset):
+    """Sun visibility per sample, adaptively (as VRAD refines luxels): one ray per texel
+    first; every sample of a texel gets a ray of its own only where that texel or one of its
+    8 neighbours disagrees. A shadow thinner than a texel that falls between the first rays
+    can be missed."""
+    rep, of_sample = _representatives(texel_id, np.ones(len(texel_id), bool))
+    first = light.sun_visibility(scene, points[rep], ng[rep], dirs[rep], offset=offset)
+    grid = np.full(int(np.prod(shape)), -1, np.int8)
+    grid[texel_id[rep]] = first.astype(np.int8)
+    grid = grid.reshape(shape)
+    padded = np.pad(grid, ((0, 0), (1, 1), (1, 1)), constant_values=-1)
+    mixed = np.zeros(shape, bool)
+    r = shape[1]
+    for dy in (0, 1, 2):
+        for dx in (0, 1, 2):
+            other = padded[:, dy:dy + r, dx:dx + r]
+            mixed |= (other >= 0) & (grid >= 0) & (other != grid)
+    lit = first[of_sample]
+    redo = mixed.reshape(-1)[texel_id]
+    redo[rep] = False
+    if redo.any():
+        lit[redo] = light.sun_visibility(scene, points[redo], ng[redo], dirs[redo], offset=offset)
+    return lit
+
+
+def _sample_geometry(target, resolution, samples):
+    """Texels of a target and, per sample, world position, geometric normal, lobes' frame."""
+    pos, ng, normals, tangents, uv, tris = geometry.target_corners(target)
+    tx = texels.rasterize(uv, resolution, samples)
+    if not len(tx.texel):
+        warnings.warn(f"{target.label}: its lightmap UVs cover no texel of the {resolution} x {resolution} map",
+                      RuntimeWarning, stacklevel=3)
+    if tx.overlapping:
+        warnings.warn(f"{target.label}: its lightmap UV islands overlap ({tx.overlapping} samples in more than "
+                      "one triangle); each texel keeps the first triangle", RuntimeWarning, stacklevel=3)
+    w = tx.bary[:, :, None]
+    points = (pos[tx.triangle] * w).sum(1)
+    t, b, n = frames.tangent_frames((normals[tx.triangle] * w).sum(1), (tangents[tx.triangle] * w).sum(1))
+    return tx, points, ng[tx.triangle], (t, b, n), tris, uv
+
+
+def _texel_maps(tx, resolution, values, valid):
+    """Mean of the valid samples of each texel: (R, R, C) and the texels that had one."""
+    r2 = resolution * resolution
+    count = np.bincount(tx.texel[valid], minlength=r2)
+    out = np.stack([np.bincount(tx.texel[valid], values[valid, c], r2) for c in range(values.shape[1])], axis=1)
+    out = out / np.maximum(count, 1)[:, None]
+    return out.reshape(resolution, resolution, -1).astype(np.float32), (count > 0).reshape(resolution, resolution)
+
+
+def bake(scene, targets, *, resolution, lighting=None, suns=(), surfaces=(), bounces=2, samples=4, margin=2,
+         basis="hl2", offset=None, stitch_seams=True, adaptive_suns=True, progress=None):
+    """Bakes lightmaps of `targets` (`Target`s) in `scene` (a `hemishadow.Scene` holding every
+    blocker); returns one dict of maps per target (see the module docstring).
+
+    resolution: texels per side, one int for all targets or one per target.
+    lighting: environment SH (K, 3), K = 1, 4, 9, 16 or 25, radiance in the project's convention
+        (`hemishadow.project_environment`, the add-on's World); None: no environment.
+    suns: `Sun`s (direction towards the light, strength in W/m^2, angular diameter).
+    surfaces: `Surface`s of the meshes that reflect or emit light besides the targets' own
+        (bounce receivers at their vertices); meshes not described stay black (block only).
+    bounces: diffuse bounces (0: direct light only). samples: supersamples per texel, in total.
+    margin: texels of padding around islands. basis: "hl2" (flat, b0-b2, ao), "sh" (flat,
+        sh0-sh3, ao) or "flat" (flat, ao). offset: the receivers' lift (`Scene`'s default).
+    adaptive_suns: a sun ray per texel first, then per sample where neighbours disagree
+        (`_sun_lit`); False: a ray per sample. stitch_seams: match texels across UV seams.
+    progress: None or a callable taking the fraction done; returning False raises
+        `hemishadow.Cancelled` and nothing is returned.
+    """
+    targets, sizes = _targets_and_sizes(targets, resolution)
+    samples = _positive_int(samples, "samples")
+    margin = _positive_int(margin, "margin", 0)
+    bounces = _positive_int(bounces, "bounces", 0)
+    if basis not in BASES:
+        raise ValueError(f"basis must be one of {BASES}, got {basis!r}")
+    lighting, suns = _lighting(lighting), _suns(suns)
+    want_sh = basis == "sh"
+    offs = texels.offsets(samples)
+
+    geo = [_sample_geometry(tg, r, samples) for tg, r in zip(targets, sizes)]
+    points = np.concatenate([g[1] for g in geo])
+    ng = np.concatenate([g[2] for g in geo])
+    t, b, n = (np.concatenate([g[3][k] for g in geo]) for k in range(3))
+    index = np.concatenate([g[0].index for g in geo])
+    lobes = n[:, None] if basis != "hl2" else np.concatenate([n[:, None], frames.hl2_world(t, b, n)], axis=1)
+
+    receivers = _bounce_receivers(targets, surfaces) if (bounces or _emits(targets, surfaces)) else []
+    vertex_count = sum(len(r[1]) for r in receivers)
+    steps = _Progress(progress, len(points) + vertex_count * (1 + bounces) + len(points) * bool(receivers))
+    usable = np.linalg.norm(ng, axis=1) > 0.5  # zero-area triangles have no normal
+    ng = np.where(usable[:, None], ng, n)
+    masks = scene.visibility(points, ng, offset=offset)
+    valid = _valid(scene, points, ng, masks, offset) & usable
+    r = max(sizes)
+    texel_id = np.concatenate([(k * r + g[0].texel // sz) * r + g[0].texel % sz
+                               for k, (g, sz) in enumerate(zip(geo, sizes))])  # (target, row, col) in a T x r x r grid
+    grid = (texel_id, (len(geo), r, r)) if adaptive_suns else None
+    maps, ao, sh = _direct(scene, points, ng, lobes, lighting, suns, index, offs, want_sh, offset, steps, masks,
+                           texel_grid=grid)
+    if receivers:
+        gathered = _indirect(scene, receivers, points, ng, valid, texel_id, lighting, suns, offs, bounces, offset, steps)
+        if gathered is not None:
+            maps += bounce.lobe_irradiance(gathered, lobes)
+            if want_sh:
+                sh += gathered[:, :4] / np.float32(np.pi)
+        steps.step(len(points))
+
+    names = ["flat"] + (["b0", "b1", "b2"] if basis == "hl2" else []) + (["sh0", "sh1", "sh2", "sh3"] if want_sh else [])
+    values = np.concatenate([maps.reshape(len(points), -1)] + ([sh.reshape(len(points), -1)] if want_sh else [])
+                            + [ao[:, None]], axis=1)
+    ends = np.cumsum([len(g[0].texel) for g in geo])
+    return [_finish(tx, r, values[end - len(tx.texel):end], valid[end - len(tx.texel):end], tris, uv, names, margin,
+                    stitch_seams)
+            for r, (tx, *_rest, tris, uv), end in zip(sizes, geo, ends)]
+
+
+def _targets_and_sizes(targets, resolution):
+    targets = list(targets)
+    if not targets:
+        raise ValueError("no targets to bake")
+    if isinstance(resolution, (list, tuple, np.ndarray)):
+        if len(resolution) != len(targets):
+            raise ValueError(f"{len(resolution)} resolutions for {len(targets)} targets")
+        return targets, [_positive_int(r, "resolution") for r in resolution]
+    return targets, [_positive_int(resolution, "resolution")] * len(targets)
+
+
+def _indirect(scene, receivers, points, ng, valid, texel_id, lighting, suns, offsets, bounces, offset, steps):
+    """Gathered SH (P, 9, 3) of the light the samples receive from the surfaces after
+    `bounces` passes, gathered once per texel; None when every surface is black."""
+    direct = []
+    for mesh_id, pts, nrm, ok, _, _ in receivers:
+        d = np.zeros((len(pts), 3), np.float32)
+        if ok.any():
+            # bounce light is soft: the proxies' sun shadows do (lod 0 costs 4x and more)
+            d[ok] = _direct(scene, pts[ok], nrm[ok], nrm[ok][:, None], lighting, suns, np.zeros(ok.sum(), np.int64),
+                            offsets, False, offset, steps, exact_suns=False)[0][:, 0]
+        direct.append(d)
+    radiance = bounce.vertex_radiance(scene, receivers, direct, bounces, offset)
+    steps.step(sum(len(r[1]) for r in receivers) * bounces)
+    if not any(r.any() for r in radiance):
+        return None
+    rep, of_sample = _representatives(texel_id, valid)
+    return scene.gather(points[rep], ng[rep], bands=bounce.BANDS, offset=offset)[of_sample]
+
+
+def _valid(scene, points, ng, masks, offset):
+    """`Scene.valid` where it can be False: a receiver is invalid when back faces cover more
+    than half its disk's cells, so one with at most half its cells blocked is valid."""
+    valid = np.ones(len(points), bool)
+    maybe = np.bitwise_count(masks).sum(axis=1) > 0.45 * cells.directions().any(axis=1).sum()
+    if maybe.any():
+        valid[maybe] = scene.valid(points[maybe], ng[maybe], offset=offset)
+    return valid
+
+
+def _representatives(texel_id, valid):
+    """One sample per texel (a valid one where there is one) and, per sample, the index of
+    its texel's representative among them: indirect light is gathered once per texel."""
+    order = np.lexsort((~valid, texel_id))
+    first = np.r_[True, texel_id[order][1:] != texel_id[order][:-1]]
+    rep = order[first]
+    group = np.cumsum(first) - 1
+    of_sample = np.empty(len(texel_id), np.int64)
+    of_sample[order] = group
+    return rep, of_sample
+
+
+def _finish(tx, resolution, values, valid, tris, uv, names, margin, stitch_seams):
+    """Texel means, invalid texels filled, padding, seams; the dict of named maps."""
+    image, known = _texel_maps(tx, resolution, values, valid)
+    had_valid = known.copy()
+    dilate.fill(image, known, tx.island)
+    dilate.dilate(image, known, margin)
+    if stitch_seams:
+        a, b = seams.seam_points(tris, uv, resolution)
+        seams.stitch(image, known, a, b)
+    out = {name: np.ascontiguousarray(image[..., 3 * i:3 * i + 3]) for i, name in enumerate(names)}
+    out["ao"] = np.ascontiguousarray(image[..., -1])
+    out["coverage"] = tx.coverage.astype(np.float32)
+    out["valid"] = had_valid
+    return out
+
+
+def _emits(targets, surfaces):
+    return any(np.any(np.asarray(s.emission) != 0) for s in list(surfaces) + [t.surface for t in targets])
+
+
+def _bounce_receivers(targets, surfaces):
+    """(mesh_id, points, normals, usable, albedo, emission) per distinct mesh."""
+    seen, out = set(), []
+    for surface in list(surfaces) + [t.surface for t in targets]:
+        if surface.mesh_id in seen:
+            continue
+        seen.add(surface.mesh_id)
+        label = surface.name or f"mesh {surface.mesh_id}"
+        pts, nrm = geometry.vertex_receivers(surface)
+        length = np.linalg.norm(nrm, axis=1)
+        usable = length > 0
+        nrm = nrm / np.where(usable, length, 1.0)[:, None]
+        albedo = geometry.per_vertex(surface.albedo, len(pts), "albedo", label)
+        emission = geometry.per_vertex(surface.emission, len(pts), "emission", label)
+        out.append((surface.mesh_id, pts, nrm, usable, albedo, emission))
+    return out
+
+
+__all__ = ["BASES", "Surface", "Target", "bake"]

@@ -1,0 +1,145 @@
+"""What the baker is given: placed meshes (`Surface`) and the objects to bake (`Target`),
+checked and brought to world space per triangle corner."""
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import basis
+
+
+@dataclass
+class Surface:
+    """A mesh of the scene as the baker sees it: `mesh_id` in the `Scene`, its vertices (V, 3)
+    and triangles (M, 3) as given to `Scene.add_mesh`, the world `matrix` (4x4, column vectors,
+    identity when None) of the instance whose vertices act as bounce receivers, and its diffuse
+    `albedo` and emitted radiance `emission` ((3,) or per vertex (V, 3)). Every instance of a
+    mesh shows the same radiance (`Scene.set_radiance`)."""
+    mesh_id: int
+    vertices: np.ndarray
+    triangles: np.ndarray
+    matrix: np.ndarray = None
+    albedo: object = 0.8
+    emission: object = 0.0
+    name: str = ""
+
+
+@dataclass
+class Target:
+    """An object to bake: its `surface`, the lightmap `uv` ((M, 3, 2) per triangle corner, or
+    (V, 2) per vertex) placing its texels, shading `normals` ((M, 3, 3) or (V, 3), object
+    space; None: face normals, flat shading), `tangents` ((M, 3, 4) or (V, 4): xyz and the
+    bitangent sign, object space, MikkTSpace of the normal-map UV in Blender; None: per
+    triangle dP/du of `tangent_uv`, or of `uv` when that is None too)."""
+    surface: Surface
+    uv: np.ndarray
+    normals: np.ndarray = None
+    tangents: np.ndarray = None
+    tangent_uv: np.ndarray = None
+    name: str = field(default="")
+
+    @property
+    def label(self):
+        return self.name or self.surface.name or f"mesh {self.surface.mesh_id}"
+
+
+def finite(values, what, shape):
+    """A float64 array of `shape` (-1: any) with only finite values, or a clear ValueError."""
+    try:
+        array = np.asarray(values, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"{what} must be numbers") from None
+    if array.ndim != len(shape) or any(s not in (-1, a) for s, a in zip(shape, array.shape)):
+        raise ValueError(f"{what} must have shape {tuple('N' if s == -1 else s for s in shape)}, got {array.shape}")
+    if not np.isfinite(array).all():
+        raise ValueError(f"{what} has a NaN or infinite value")
+    return array
+
+
+def per_vertex(value, count, what, label):
+    """(3,) or (V, 3) colour -> (V, 3)."""
+    array = np.asarray(value, dtype=np.float64)
+    if array.ndim <= 1:
+        array = np.broadcast_to(array, (3,)) if array.size in (1, 3) else array
+        array = finite(array, f"{label}: {what}", (3,))
+        return np.broadcast_to(array, (count, 3))
+    return finite(array, f"{label}: {what}", (count, 3))
+
+
+def placed(surface, label):
+    """World vertices (V, 3), triangles (M, 3) int64, the matrix's 3x3 part and its normal matrix."""
+    vertices = finite(surface.vertices, f"{label}: vertices", (-1, 3))
+    triangles = np.asarray(surface.triangles)
+    if triangles.ndim != 2 or triangles.shape[1] != 3 or triangles.dtype.kind not in "iu":
+        raise ValueError(f"{label}: triangles must be integer (M, 3), got {triangles.shape} {triangles.dtype}")
+    if not len(triangles):
+        raise ValueError(f"{label}: the mesh has no faces")
+    if triangles.min() < 0 or triangles.max() >= len(vertices):
+        raise ValueError(f"{label}: triangle indices out of range 0..{len(vertices) - 1}")
+    matrix = np.eye(4) if surface.matrix is None else finite(surface.matrix, f"{label}: matrix", (4, 4))
+    linear = matrix[:3, :3]
+    world = vertices @ linear.T + matrix[:3, 3]
+    return world, triangles.astype(np.int64), linear, np.linalg.inv(linear).T
+
+
+def corners(values, triangles, width, what, label):
+    """Per-corner (M, 3, width) from per-corner or per-vertex input."""
+    array = np.asarray(values)
+    if array.ndim == 2:
+        array = finite(array, f"{label}: {what}", (-1, width))
+        if len(array) <= triangles.max():
+            raise ValueError(f"{label}: {what} has {len(array)} rows, fewer than the mesh's vertices")
+        return array[triangles]
+    return finite(array, f"{label}: {what}", (len(triangles), 3, width))
+
+
+def target_corners(target):
+    """World-space corner data of a target: positions, geometric normals, shading normals,
+    tangents (xyz + sign), lightmap UVs."""
+    label = target.label
+    if target.uv is None:
+        raise ValueError(f"{label}: no lightmap UVs given")
+    world, tris, linear, normal_matrix = placed(target.surface, label)
+    pos = world[tris]
+    local = finite(target.surface.vertices, f"{label}: vertices", (-1, 3))[tris]
+    ng_local = np.cross(local[:, 1] - local[:, 0], local[:, 2] - local[:, 0])
+    ng = ng_local @ normal_matrix.T
+    ng /= np.maximum(np.linalg.norm(ng, axis=1, keepdims=True), 1e-300)
+    uv = corners(target.uv, tris, 2, "uv", label)
+    if target.normals is None:
+        normals = np.repeat(ng[:, None], 3, axis=1)
+    else:
+        normals = corners(target.normals, tris, 3, "normals", label) @ normal_matrix.T
+    if target.tangents is None:
+        tuv = uv if target.tangent_uv is None else corners(target.tangent_uv, tris, 2, "tangent_uv", label)
+        tangents = basis.uv_tangents(pos, tuv, normals)
+    else:
+        tangents = corners(target.tangents, tris, 4, "tangents", label).copy()
+        tangents[..., :3] = tangents[..., :3] @ linear.T
+        tangents[..., 3] *= np.sign(np.linalg.det(linear))  # a mirrored object turns its handedness over
+    return pos, ng, normals, tangents, uv, tris
+
+
+#: Vertex receivers move this fraction of the way towards the mean centroid of their
+#: triangles: a vertex where a floor meets a wall would otherwise see half its hemisphere
+#: through the junction (outside the room) and pass on half the light.
+VERTEX_INSET = 0.02
+
+
+def vertex_receivers(surface):
+    """World positions (V, 3), nudged off junctions (`VERTEX_INSET`), and area-weighted
+    normals (V, 3) of a surface's vertices."""
+    world, tris, linear, normal_matrix = placed(surface, surface.name or f"mesh {surface.mesh_id}")
+    local = np.asarray(surface.vertices, dtype=np.float64)[tris]
+    face = np.cross(local[:, 1] - local[:, 0], local[:, 2] - local[:, 0]) @ normal_matrix.T
+    area = np.linalg.norm(np.cross(world[tris][:, 1] - world[tris][:, 0], world[tris][:, 2] - world[tris][:, 0]), axis=1)
+    face = face / np.maximum(np.linalg.norm(face, axis=1, keepdims=True), 1e-300) * area[:, None]
+    normals = np.zeros_like(world)
+    centroids = np.zeros_like(world)
+    centroid = world[tris].mean(axis=1)
+    for k in range(3):
+        np.add.at(normals, tris[:, k], face)
+        np.add.at(centroids, tris[:, k], centroid)
+    count = np.bincount(tris.ravel(), minlength=len(world))[:, None]
+    inset = np.where(count > 0, centroids / np.maximum(count, 1) - world, 0.0)
+    return world + VERTEX_INSET * inset, normals

@@ -1,0 +1,176 @@
+"""Direct light at receivers: the environment (SH lighting) and sun lamps.
+
+Both are integrated over the receiver's geometric hemisphere from the engine's raw
+visibility masks (`Scene.visibility`, queried with the geometric normal): a lobe
+max(0, v.s) for any unit v (the shading normal, an HL2 basis vector) gets the cell weights of
+`cells.lobe_weights`, so a basis vector tilted 54.7 degrees from the normal sees only the
+light above the surface, as Cycles does with a Normal Map node (0.7887 on an open plane).
+The transfer vectors of `Scene.transfer` cannot clip a tilted lobe at the surface.
+
+Environment: radiance per cell from the lighting rotated into each receiver's frame (fitted
+exactly, band by band, on directions over the sphere). Suns: one exact shadow ray per sample,
+a visibility query whose normal is tilted so that the sun's direction passes through the
+centre of one of the mask's four central cells, drawn with every triangle (lod 0).
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .. import sh_basis
+from . import basis, cells
+
+
+@dataclass
+class Sun:
+    """A sun lamp: `direction` towards the light (world), `strength` the irradiance in W/m^2
+    on a surface facing it (scalar or RGB, Blender's Strength x colour), `angle` its angular
+    diameter in radians (its disk is sampled across a texel's samples)."""
+    direction: tuple
+    strength: object = 1.0
+    angle: float = 0.0
+
+
+def _fibonacci(count):
+    k = np.arange(count) + 0.5
+    z = 1 - 2 * k / count
+    phi = k * np.pi * (3 - np.sqrt(5))
+    r = np.sqrt(1 - z * z)
+    return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
+
+
+def local_lighting(lighting, t, b, n):
+    """Lighting SH (K, 3) expressed in each receiver's frame (rows t, b, n): (P, K, 3)."""
+    k = len(lighting)
+    bands = int(round(np.sqrt(k)))
+    dirs = _fibonacci(3 * k)
+    fit = np.linalg.pinv(sh_basis(dirs, bands).astype(np.float64))  # (K, 3K)
+    world = dirs[None, :, 0:1] * t[:, None] + dirs[None, :, 1:2] * b[:, None] + dirs[None, :, 2:3] * n[:, None]
+    radiance = (sh_basis(world.reshape(-1, 3), bands) @ lighting).reshape(len(t), 3 * k, 3)
+    return np.einsum("kd,pdc->pkc", fit, radiance).astype(np.float32)
+
+
+def environment(blocked, t, b, n, lobes, lighting, want_sh=False):
+    """Irradiance / pi (P, L, 3) for unit lobe directions (P, L, 3) (world) of receivers with
+    masks `blocked` (P, 1024) taken in the engine frame (t, b, n) of their geometric normals;
+    the open fraction of the first lobe (P,); and with want_sh the L1 SH (P, 4, 3) of the
+    incident radiance / pi (world), else None."""
+    local = np.stack([(lobes * t[:, None]).sum(-1), (lobes * b[:, None]).sum(-1), (lobes * n[:, None]).sum(-1)], -1)
+    weights = cells.lobe_weights(local)                         # (P, L, 1024)
+    open_cells = (~blocked).astype(np.float32)
+    seen = weights * open_cells[:, None, :]
+    ao = seen[:, 0].sum(-1) / np.maximum(weights[:, 0].sum(-1), 1e-30)
+    if lighting is None:
+        return np.zeros(lobes.shape[:2] + (3,), np.float32), ao, (np.zeros((len(t), 4, 3), np.float32) if want_sh else None)
+    bands = int(round(np.sqrt(len(lighting))))
+    y_cells = sh_basis(cells.radiance_directions(), bands)     # (1024, K)
+    lit = local_lighting(lighting, t, b, n)                     # (P, K, 3)
+    p, l = seen.shape[:2]
+    transfer = (seen.reshape(p * l, -1) @ y_cells).reshape(p, l, -1)
+    maps = np.einsum("plk,pkc->plc", transfer, lit) / np.float32(np.pi)
+    sh = None
+    if want_sh:
+        moments = cells.moments().astype(np.float32)
+        per_cell = np.stack([basis.Y00 * moments[:, 3], -basis.C1 * moments[:, 1], basis.C1 * moments[:, 2],
+                             -basis.C1 * moments[:, 0]], axis=1)  # integral of Y_k over each cell
+        radiance = np.einsum("ck,pkj->pcj", y_cells, lit)
+        local_sh = np.einsum("pc,pcj,ck->pkj", open_cells, radiance, per_cell)
+        sh = basis.l1_to_world(local_sh, t, b, n) / np.float32(np.pi)
+    return maps.astype(np.float32), ao.astype(np.float32), sh
+
+
+_TARGETS = [(x, y) for y in (-1 / 32, 1 / 32) for x in (-1 / 32, 1 / 32)]
+
+
+def _branch_frame(q, sign):
+    a = -1.0 / (sign + q[:, 2])  # the other branch is singular near its pole: NaN, rejected
+    b = q[:, 0] * q[:, 1] * a
+    t = np.stack([1.0 + sign * q[:, 0] ** 2 * a, sign * b, -sign * q[:, 0]], axis=1)
+    bt = np.stack([b, sign + q[:, 1] ** 2 * a, -q[:, 1]], axis=1)
+    return t, bt
+
+
+def shadow_normals(directions, ng):
+    """Query normals (P, 3) and cell indices (P,) such that `directions` pass through the
+    centre of that mask cell; among the four central cells, the one whose normal leans most
+    towards the geometric normal `ng` (the query point is lifted along it)."""
+    best_q = directions.copy()
+    best_cell = np.full(len(directions), -1)
+    best_score = np.full(len(directions), -np.inf)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        _search(directions, ng, best_q, best_cell, best_score)
+    return best_q, best_cell
+
+
+def _search(directions, ng, best_q, best_cell, best_score):
+    for x, y in _TARGETS:
+        z = np.sqrt(1 - x * x - y * y)
+        for sign in (1.0, -1.0):
+            q = directions.copy()
+            for _ in range(12):
+                t, bt = _branch_frame(q, sign)
+                q = directions - x * t - y * bt
+                q /= np.linalg.norm(q, axis=1, keepdims=True)
+            t, bt = engine_frame_f32(q)
+            residual = np.abs((directions * t).sum(1) - x) + np.abs((directions * bt).sum(1) - y)
+            ok = (np.where(np.signbit(q[:, 2]), -1.0, 1.0) == sign) & (residual < 1e-4) & np.isfinite(q).all(1)
+            score = np.where(ok, (q * ng).sum(1), -np.inf)
+            better = score > best_score
+            best_q[better], best_score[better] = q[better], score[better]
+            best_cell[better] = int(round((y + 1) * 16 - 0.5)) * 32 + int(round((x + 1) * 16 - 0.5))
+
+
+def engine_frame_f32(q):
+    """The engine's frame of normals as it sees them (float32)."""
+    t, b = cells.engine_frame(q.astype(np.float32).astype(np.float64))
+    return t, b
+
+
+def sun_visibility(scene, points, ng, directions, offset=None, exact=True):
+    """1.0 where the ray from each point towards `directions` (P, 3) is open, else 0.0 (the
+    four central cells' mean where no query normal was found, which does not happen for
+    unit directions). exact: with every triangle (lod 0); else with the scene's proxies."""
+    q, cell = shadow_normals(directions, ng)
+    lod = scene.lod
+    if exact:
+        scene.lod = 0.0  # every triangle: the hierarchy's proxies cast false sun shadows (docs/lightmaps.md)
+    try:
+        blocked = cells.unpack(scene.visibility(points, q, offset=offset))
+    finally:
+        scene.lod = lod
+    found = cell >= 0
+    lit = np.where(found, ~blocked[np.arange(len(q)), np.maximum(cell, 0)], False).astype(np.float32)
+    if not found.all():
+        centre = [15 * 32 + 15, 15 * 32 + 16, 16 * 32 + 15, 16 * 32 + 16]
+        lit[~found] = (~blocked[~found][:, centre]).mean(axis=1)
+    return lit
+
+
+def sun_directions(sun, count, index, offsets):
+    """Per sample, a direction inside the sun's disk (its centre when the angle is 0): sample
+    `index` of a texel takes offset `index` of the texel's pattern, mapped onto the disk."""
+    d = np.asarray(sun.direction, dtype=np.float64)
+    d = d / np.linalg.norm(d)
+    if sun.angle <= 0:
+        return np.broadcast_to(d, (count, 3)).copy()
+    u, v = offsets[index % len(offsets)].T * 2 - 1
+    r = np.where(np.abs(u) > np.abs(v), u, v)  # concentric square -> disk (Shirley, Chiu 1997)
+    phi = np.where(np.abs(u) > np.abs(v), np.pi / 4 * v / np.where(u == 0, 1, u), np.pi / 2 - np.pi / 4 * u / np.where(v == 0, 1, v))
+    radius = np.tan(sun.angle / 2) * r
+    t, b = cells.engine_frame(d[None])
+    out = d + radius[:, None] * (np.cos(phi)[:, None] * t + np.sin(phi)[:, None] * b)
+    return out / np.linalg.norm(out, axis=1, keepdims=True)
+
+
+def sun_light(sun, lit, ng, lobes, directions, want_sh=False):
+    """Irradiance / pi (P, L, 3) of a sun on lobes (P, L, 3), and its L1 SH (P, 4, 3) / pi."""
+    rgb = np.broadcast_to(np.asarray(sun.strength, dtype=np.float64), (3,))
+    facing = lit * ((directions * ng).sum(1) > 0)
+    cosine = np.maximum((lobes * directions[:, None]).sum(-1), 0.0)
+    maps = (facing[:, None, None] * cosine[..., None] * rgb / np.pi).astype(np.float32)
+    sh = None
+    if want_sh:
+        y = np.stack([np.full(len(directions), basis.Y00), -basis.C1 * directions[:, 1], basis.C1 * directions[:, 2],
+                      -basis.C1 * directions[:, 0]], axis=1)
+        sh = (facing[:, None, None] * y[..., None] * rgb / np.pi).astype(np.float32)
+    return maps, sh

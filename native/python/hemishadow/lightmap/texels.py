@@ -1,0 +1,156 @@
+"""Texels of a UV layout: triangles rasterized in UV space with supersampling.
+
+Texel (row r, column c) of an R x R map covers u in [c, c+1] / R and v in [1 - (r+1)/R,
+1 - r/R]: its centre is u = (c + 0.5) / R, v = 1 - (r + 0.5) / R, rows top to bottom as in an
+EXR. In texel space x = u R, y = (1 - v) R, texel (r, c) is the unit square at (c, r).
+
+Each texel holds `samples` points (a regular s x s grid when samples = s^2, else the R2
+low-discrepancy sequence); a sample belongs to the first triangle that contains it. A texel
+that a triangle touches without any sample inside it (an island's rim, a sliver) gets one
+sample at the point of that triangle nearest to its centre, so it uses the part of the
+triangle it covers. `coverage` is 1 where a texel centre lies in a triangle, before padding.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+_CANDIDATES_PER_CHUNK = 1 << 20
+_EPS = 1e-9
+
+
+@dataclass
+class Texels:
+    texel: np.ndarray      # (S,) int64: flat texel index r * R + c of each sample
+    triangle: np.ndarray   # (S,) int64
+    bary: np.ndarray       # (S, 3) float64 barycentric weights of the triangle's corners
+    coverage: np.ndarray   # (R, R) bool: a texel centre inside a triangle
+    island: np.ndarray     # (R, R) bool: texels with at least one sample
+    index: np.ndarray      # (S,) int64: which of the texel's sample positions (0 for rim samples)
+    overlapping: int       # samples strictly inside more than one triangle (overlapping UVs)
+
+
+def offsets(samples):
+    """Sample positions (n, 2) inside the unit texel."""
+    side = int(round(np.sqrt(samples)))
+    if side * side == samples:
+        g = (np.arange(side) + 0.5) / side
+        x, y = np.meshgrid(g, g)
+        return np.stack([x.ravel(), y.ravel()], axis=1)
+    g = 1.32471795724474602596  # plastic number: the R2 sequence (Roberts 2018)
+    k = np.arange(1, samples + 1)[:, None]
+    return (0.5 + k * np.array([1 / g, 1 / (g * g)])) % 1.0
+
+
+def texel_space(uv, resolution):
+    """UV (..., 2) -> texel-space (x, y) = (u R, (1 - v) R)."""
+    uv = np.asarray(uv, dtype=np.float64)
+    return np.stack([uv[..., 0] * resolution, (1.0 - uv[..., 1]) * resolution], axis=-1)
+
+
+def barycentric(tri, p):
+    """Barycentric weights (K, 3) of points p (K, 2) in triangles tri (K, 3, 2)."""
+    a, b, c = tri[:, 0], tri[:, 1], tri[:, 2]
+    area = _cross(b - a, c - a)
+    wa = _cross(b - p, c - p) / area
+    wb = _cross(c - p, a - p) / area
+    return np.stack([wa, wb, 1.0 - wa - wb], axis=1)
+
+
+def _cross(a, b):
+    return a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+
+
+def closest_barycentric(tri, p):
+    """Barycentric weights of the point of each triangle nearest to p (K, 2)."""
+    w = barycentric(tri, p)
+    best = w.copy()
+    best_d = np.where((w >= 0).all(axis=1), 0.0, np.inf)
+    for i, j in ((0, 1), (1, 2), (2, 0)):
+        e = tri[:, j] - tri[:, i]
+        t = np.clip(((p - tri[:, i]) * e).sum(1) / np.maximum((e * e).sum(1), 1e-300), 0.0, 1.0)
+        d = (((tri[:, i] + t[:, None] * e) - p) ** 2).sum(1)
+        better = d < best_d
+        cand = np.zeros_like(w)
+        cand[:, i], cand[:, j] = 1.0 - t, t
+        best[better], best_d[better] = cand[better], d[better]
+    return best
+
+
+def _overlaps_square(tri, corner):
+    """Whether each triangle (K, 3, 2) overlaps the unit square at corner (K, 2) with positive
+    area (separating axes: the square's are covered by the candidates' bounding boxes)."""
+    square = corner[:, None, :] + np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [1.0, 1.0]])
+    hit = np.ones(len(tri), bool)
+    for i, j in ((0, 1), (1, 2), (2, 0)):
+        e = tri[:, j] - tri[:, i]
+        normal = np.stack([-e[:, 1], e[:, 0]], axis=1)
+        t = (tri * normal[:, None]).sum(-1)
+        s = (square * normal[:, None]).sum(-1)
+        hit &= (np.minimum(t.max(1), s.max(1)) - np.maximum(t.min(1), s.min(1))) > _EPS * np.abs(normal).sum(1)
+    return hit
+
+
+def rasterize(uv, resolution, samples):
+    """Samples of every texel that the triangles' UVs (M, 3, 2) reach; see `Texels`."""
+    r = int(resolution)
+    tri = texel_space(uv, r)
+    area = np.abs(_cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]))
+    lo = np.clip(np.floor(tri.min(axis=1)), 0, r).astype(np.int64)
+    hi = np.clip(np.ceil(tri.max(axis=1)), 0, r).astype(np.int64)
+    size = np.where(area[:, None] > 1e-12, np.maximum(hi - lo, 0), 0)
+    count = size[:, 0] * size[:, 1]
+    offs = offsets(samples)
+    keys, tris, bary, touched_t, touched_tri = [], [], [], [], []
+    strict_keys = []
+    coverage = np.zeros(r * r, bool)
+    ends = np.cumsum(count)
+    start = 0
+    while start < len(tri):
+        stop = int(np.searchsorted(ends, (ends[start - 1] if start else 0) + _CANDIDATES_PER_CHUNK, side="right"))
+        stop = max(stop, start + 1)
+        t_idx = np.repeat(np.arange(start, stop), count[start:stop])
+        first = np.repeat(np.cumsum(count[start:stop]) - count[start:stop], count[start:stop])
+        k = np.arange(len(t_idx)) - first
+        cx = lo[t_idx, 0] + k % np.maximum(size[t_idx, 0], 1)
+        cy = lo[t_idx, 1] + k // np.maximum(size[t_idx, 0], 1)
+        cell = cy * r + cx
+        corners = tri[t_idx]
+        w = barycentric(corners, np.stack([cx + 0.5, cy + 0.5], axis=1).astype(np.float64))
+        coverage[cell[(w >= -_EPS).all(axis=1)]] = True
+        hit_any = np.zeros(len(t_idx), bool)
+        for j, (ox, oy) in enumerate(offs):
+            w = barycentric(corners, np.stack([cx + ox, cy + oy], axis=1).astype(np.float64))
+            inside = (w >= -_EPS).all(axis=1)
+            hit_any |= inside
+            keys.append(cell[inside] * len(offs) + j)
+            strict_keys.append(cell[(w > 1e-6).all(axis=1)] * len(offs) + j)
+            tris.append(t_idx[inside])
+            bary.append(w[inside])
+        rest = ~hit_any
+        rest[rest] = _overlaps_square(corners[rest], np.stack([cx[rest], cy[rest]], axis=1).astype(np.float64))
+        touched_t.append(cell[rest])
+        touched_tri.append(t_idx[rest])
+        start = stop
+    keys, tris, bary = np.concatenate(keys), np.concatenate(tris), np.concatenate(bary)
+    strict = np.concatenate(strict_keys)
+    overlapping = int((np.bincount(strict, minlength=r * r * len(offs)) > 1).sum())
+    order = np.argsort(keys, kind="stable")  # a sample on a shared edge: the first triangle's
+    first = order[np.r_[True, keys[order][1:] != keys[order][:-1]]] if len(keys) else order
+    keys = keys[first]
+    texel, tris, bary, index = keys // len(offs), tris[first], bary[first], keys % len(offs)
+    # texels touched by a triangle but holding no sample: the triangle's point nearest the centre
+    t_cells, t_tris = np.concatenate(touched_t), np.concatenate(touched_tri)
+    has_sample = np.zeros(r * r, bool)
+    has_sample[texel] = True
+    keep = ~has_sample[t_cells]
+    t_cells, where = np.unique(t_cells[keep], return_index=True)
+    t_tris = t_tris[keep][where]
+    centres = np.stack([t_cells % r + 0.5, t_cells // r + 0.5], axis=1).astype(np.float64)
+    t_bary = closest_barycentric(tri[t_tris], centres)
+    texel = np.concatenate([texel, t_cells])
+    island = np.zeros(r * r, bool)
+    island[texel] = True
+    return Texels(texel=texel, triangle=np.concatenate([tris, t_tris]), bary=np.concatenate([bary, t_bary]),
+                  coverage=coverage.reshape(r, r), island=island.reshape(r, r),
+                  index=np.concatenate([index, np.zeros(len(t_cells), np.int64)]), overlapping=int(overlapping))

@@ -1,0 +1,425 @@
+"""Lightmap baker, the engine part (issue 11): texels in, maps out, without Blender.
+
+Units: irradiance / pi (Cycles' Diffuse bake, Direct + Indirect, Color off). Every check looks
+at the worst texel. Run from a worktree with PYTHONPATH=native/python when the installed
+package is another checkout's.
+"""
+
+import math
+
+import numpy as np
+import pytest
+import trimesh
+from trimesh.ray.ray_pyembree import RayMeshIntersector
+
+hemishadow = pytest.importorskip("hemishadow")
+import hemishadow.lightmap as lm  # noqa: E402  (fails, not skips, where it is missing)
+from hemishadow.lightmap import Sun, Surface, Target, bake, texels  # noqa: E402
+from hemishadow.lightmap import seams as seam_mod  # noqa: E402
+
+B_OPEN = (1 + 1 / math.sqrt(3)) / 2  # an HL2 lobe on an open plane: 0.7887
+
+
+def uniform_sky(radiance=1.0, bands=3):
+    """SH (bands^2, 3) of a uniform sky of the given radiance."""
+    sh = np.zeros((bands * bands, 3), np.float32)
+    sh[0] = radiance * math.sqrt(4 * math.pi)
+    return sh
+
+
+def grid_plane(size=2.0, n=4, z=0.0):
+    """A size x size square at height z of n x n quads; UV [0, 1]^2 from x, y."""
+    g = np.linspace(-size / 2, size / 2, n + 1)
+    x, y = np.meshgrid(g, g)
+    v = np.stack([x.ravel(), y.ravel(), np.full(x.size, z)], axis=1)
+    i = np.arange(n)
+    a = (i[:, None] * (n + 1) + i[None, :]).ravel()
+    tris = np.concatenate([np.stack([a, a + 1, a + n + 2], 1), np.stack([a, a + n + 2, a + n + 1], 1)])
+    return v, tris, v[:, :2] / size + 0.5
+
+
+def cube(lo, hi):
+    box = trimesh.creation.box(bounds=[lo, hi])
+    return np.asarray(box.vertices), np.asarray(box.faces)
+
+
+def scene_of(*meshes):
+    scene = hemishadow.Scene()
+    ids = []
+    for v, t in meshes:
+        ids.append(scene.add_mesh(v, t))
+        scene.add_instance(ids[-1])
+    return scene, ids
+
+
+# --- units and the HL2 basis -------------------------------------------------------------
+
+
+@pytest.mark.parametrize("tangents", ["fallback", "rotated"])
+def test_open_plane_under_a_uniform_sky(tangents):
+    v, t, uv = grid_plane()
+    scene, (mid,) = scene_of((v, t))
+    tan = None
+    if tangents == "rotated":  # any tangent in the plane: the basis turns, the values do not
+        angle = np.linspace(0, 5, len(v))
+        tan = np.stack([np.cos(angle), np.sin(angle), np.zeros(len(v)), np.where(angle > 2, -1.0, 1.0)], 1)
+    out = bake(scene, [Target(Surface(mid, v, t), uv, tangents=tan)], resolution=24, lighting=uniform_sky())[0]
+    assert out["coverage"].all() and out["valid"].all()
+    assert np.abs(out["flat"] - 1.0).max() < 2e-4
+    for name in ("b0", "b1", "b2"):
+        assert np.abs(out[name] - B_OPEN).max() < 2e-4, name
+    assert np.abs(out["ao"] - 1.0).max() < 1e-4
+
+
+@pytest.mark.parametrize("matrix", [np.diag([-1.0, 1, 1, 1]), np.diag([2.0, 0.5, 1, 1])], ids=["mirrored", "scaled"])
+def test_placed_instances_keep_their_facing(matrix):
+    """Normals go through the inverse transpose: a mirrored or stretched plane still faces up."""
+    v, t, uv = grid_plane()
+    scene = hemishadow.Scene()
+    mid = scene.add_mesh(v, t)
+    scene.add_instance(mid, matrix)
+    tan = np.tile([1.0, 0.0, 0.0, 1.0], (len(v), 1))
+    out = bake(scene, [Target(Surface(mid, v, t, matrix), uv, tangents=tan)], resolution=8, lighting=uniform_sky(),
+               bounces=1)[0]
+    assert out["valid"].all() and np.abs(out["flat"] - 1).max() < 2e-4 and np.abs(out["b0"] - B_OPEN).max() < 2e-4
+
+
+def test_hl2_lobes_follow_the_tangent_frame():
+    """A sun straight along b0 (in the texel's tangent frame) gives b0 its full strength and
+    b1, b2 (orthogonal to b0) nothing: the basis is in Valve's order, in the tangent frame."""
+    v, t, uv = grid_plane()
+    scene, (mid,) = scene_of((v, t))
+    tan = np.tile([0.0, 1.0, 0.0, 1.0], (len(v), 1))  # x = +Y, so y = cross(n, t) = -X
+    b0 = lm.HL2[0, 0] * np.array([0, 1.0, 0]) + lm.HL2[0, 1] * np.array([-1.0, 0, 0]) + lm.HL2[0, 2] * np.array([0, 0, 1.0])
+    out = bake(scene, [Target(Surface(mid, v, t), uv, tangents=tan)], resolution=8, suns=[Sun(b0, math.pi)],
+               bounces=0)[0]
+    assert np.abs(out["b0"] - 1.0).max() < 1e-5
+    assert np.abs(out["b1"]).max() < 1e-5 and np.abs(out["b2"]).max() < 1e-5
+    assert np.abs(out["flat"] - 1 / math.sqrt(3)).max() < 1e-5
+
+
+def test_l1_sh_of_an_open_plane():
+    """sh0..sh3: the integral of L Y_k over the upper hemisphere / pi, world space: for a sky of
+    radiance 1, 2 pi Y00 / pi, 0, C1 pi / pi, 0 (Y(1,0) = 0.488603 z)."""
+    v, t, uv = grid_plane()
+    scene, (mid,) = scene_of((v, t))
+    out = bake(scene, [Target(Surface(mid, v, t), uv)], resolution=8, lighting=uniform_sky(bands=5), basis="sh")[0]
+    expected = [2 * 0.28209479, 0.0, 0.48860251, 0.0]
+    for k, value in enumerate(expected):
+        assert np.abs(out[f"sh{k}"] - value).max() < 2e-4, k
+    assert "b0" not in out
+
+
+# --- occlusion, invalid texels, bounce --------------------------------------------------
+
+
+def test_box_on_a_plane_darkens_and_invalid_texels_are_filled():
+    v, t, uv = grid_plane(n=8)
+    box = cube([-0.3, -0.3, -0.2], [0.3, 0.3, 0.5])  # sunk into the plane: texels under it are inside
+    scene, (mid, _) = scene_of((v, t), box)
+    r = 32
+    out = bake(scene, [Target(Surface(mid, v, t), uv)], resolution=r, lighting=uniform_sky(), bounces=0)[0]
+    centre = (np.arange(r) + 0.5) / r * 2 - 1
+    x, y = np.meshgrid(centre, -centre)  # rows top to bottom: v = 1 at row 0
+    inside = (np.abs(x) < 0.25) & (np.abs(y) < 0.25)
+    near = (np.maximum(np.abs(x), np.abs(y)) > 0.35) & (np.maximum(np.abs(x), np.abs(y)) < 0.45)
+    far = np.maximum(np.abs(x), np.abs(y)) > 0.9
+    assert not out["valid"][inside].any() and out["valid"][far].all()
+    assert out["flat"][near, 0].max() < 0.9          # in the box's shadow
+    assert out["flat"][far, 0].min() > out["flat"][near, 0].max()
+    # filled from valid neighbours (the darkest ring around the box), never black
+    assert out["flat"][inside, 0].min() > 0.2
+    assert out["flat"][inside, 0].max() <= out["flat"][near, 0].max() + 1e-6
+
+
+def test_environment_occlusion_against_ray_casting():
+    """flat and b0 next to a box under a sky brighter overhead and towards +X, against Embree:
+    uniformly distributed rays over each texel centre's hemisphere, radiance from the same SH."""
+    import reference as ref
+
+    v, t, uv = grid_plane(size=2.0, n=2)
+    box = cube([-0.2, -0.5, 0], [0.2, 0.5, 0.6])
+    scene, (mid, _) = scene_of((v, t), box)
+    sky = uniform_sky(bands=3)
+    sky[2] = 1.2  # Y(1,0): brighter overhead
+    sky[3] = -0.8  # Y(1,1) = -C x: brighter towards +X
+    tan = np.tile([1.0, 0.0, 0.0, 1.0], (len(v), 1))
+    r = 16
+    out = bake(scene, [Target(Surface(mid, v, t), uv, tangents=tan)], resolution=r, lighting=sky, samples=1,
+               bounces=0, margin=0)[0]
+    c = (np.arange(r) + 0.5) / r * 2 - 1
+    x, y = np.meshgrid(c, -c)
+    points = np.stack([x.ravel(), y.ravel(), np.zeros(x.size)], 1)
+    rng = np.random.default_rng(1)
+    n_side = 64
+    u1 = (np.arange(n_side)[:, None] + rng.random((n_side, n_side))) / n_side
+    u2 = (np.arange(n_side)[None, :] + rng.random((n_side, n_side))) / n_side
+    z, phi = u1.ravel(), 2 * math.pi * u2.ravel()
+    dirs = np.stack([np.sqrt(1 - z * z) * np.cos(phi), np.sqrt(1 - z * z) * np.sin(phi), z], 1)  # uniform
+    radiance = ref.sh_basis_reference(dirs, 3) @ sky[:, 0]
+    caster = RayMeshIntersector(trimesh.Trimesh(*box, process=False))
+    origins = np.repeat(points + [0, 0, 1e-4], len(dirs), axis=0)
+    blocked = caster.intersects_any(origins, np.tile(dirs, (len(points), 1))).reshape(len(points), -1)
+    seen = radiance * ~blocked
+    b0 = lm.HL2[0]  # tangent +X, bitangent +Y, normal +Z: the basis as given
+    reference = {"flat": 2 * (seen * dirs[:, 2]).mean(1), "b0": 2 * (seen * np.maximum(dirs @ b0, 0)).mean(1)}
+    valid = out["valid"].ravel()
+    assert valid.sum() > 200
+    for name, expected in reference.items():
+        error = np.abs(out[name][..., 0].ravel() - expected)[valid] / expected[valid]
+        print(name, "relative error: mean", error.mean(), "worst", error.max())
+        assert error.max() < 0.03 and error.mean() < 0.01, name
+
+
+def test_bounces_in_a_closed_emissive_room():
+    """A closed room of emission 1 and albedo a: every direction sees walls, so the floor's
+    texels hold 1 + a + ... + a^N after N bounces."""
+    albedo = 0.5
+    room = cube([-1, -1, -1], [1, 1, 1])
+    room = (room[0], room[1][:, ::-1].copy())  # facing inwards
+    v, t, uv = grid_plane(size=2.0, n=4, z=-0.98)
+    scene, (floor, walls) = scene_of((v, t), room)
+    for bounces in (0, 1, 2):
+        target = Target(Surface(floor, v, t, albedo=albedo, emission=1.0, name="floor"), uv)
+        out = bake(scene, [target], resolution=8, bounces=bounces, surfaces=[Surface(walls, *room, albedo=albedo,
+                                                                                    emission=1.0)])[0]
+        expected = sum(albedo ** k for k in range(bounces + 1))
+        assert np.abs(out["flat"] / expected - 1).max() < 0.02, (bounces, out["flat"].min(), out["flat"].max())
+        assert np.abs(out["b1"] / expected - B_OPEN).max() < 0.03
+
+
+# --- texels, padding, seams -------------------------------------------------------------
+
+
+def test_texel_centre_convention():
+    """coverage: texel (r, c) is centred at u = (c + .5) / R, v = 1 - (r + .5) / R."""
+    tri_uv = np.array([[0.0, 0.0], [1.0, 0.0], [0.1, 0.62]])
+    r = 10
+    out = texels.rasterize(tri_uv[None], r, 4)
+    c, row = np.meshgrid(np.arange(r), np.arange(r))
+    u, v = (c + 0.5) / r, 1 - (row + 0.5) / r
+    a, b, c3 = tri_uv  # counter-clockwise: a point is inside when left of every edge
+    side = [(q[0] - p[0]) * (v - p[1]) - (q[1] - p[1]) * (u - p[0]) for p, q in ((a, b), (b, c3), (c3, a))]
+    expected = (np.stack(side) > 0).all(axis=0)
+    print(expected.astype(int))
+    assert expected.sum() == 30 and expected[-1, :9].all() and not expected[-1, 9]
+    assert np.array_equal(out.coverage, expected)
+    assert not out.coverage[:3].any()   # row 0 is the top of the image (v near 1)
+    # texels the triangle touches without covering their centre still get samples
+    assert (out.island & ~out.coverage).any() and (out.island >= out.coverage).all()
+
+
+@pytest.mark.parametrize("margin", [0, 1, 3])
+def test_dilation_pads_exactly_margin_texels(margin):
+    v = np.array([[-0.5, -0.5, 0], [0.5, -0.5, 0], [0.5, 0.5, 0], [-0.5, 0.5, 0]])
+    t = np.array([[0, 1, 2], [0, 2, 3]])
+    uv = np.array([[0.375, 0.375], [0.625, 0.375], [0.625, 0.625], [0.375, 0.625]])  # texels 6..9 of 16
+    scene, (mid,) = scene_of((v, t))
+    out = bake(scene, [Target(Surface(mid, v, t), uv)], resolution=16, lighting=uniform_sky(), margin=margin)[0]
+    idx = np.arange(16)
+    distance = np.maximum(np.maximum(6 - idx, idx - 9), 0)
+    chebyshev = np.maximum(distance[:, None], distance[None, :])
+    filled = out["flat"][..., 0] > 0
+    assert np.array_equal(filled, chebyshev <= margin)
+    assert np.abs(out["flat"][filled] - 1).max() < 2e-4
+
+
+def cylinder(segments=24, rings=3, radius=0.5, height=1.0):
+    """An open cylinder about +Z with one UV seam at angle 0 (vertices shared across it)."""
+    angle = np.arange(segments) * 2 * np.pi / segments
+    z = np.linspace(0, height, rings + 1)
+    v = np.array([[radius * math.cos(a), radius * math.sin(a), h] for h in z for a in angle])
+    tris, uvs = [], []
+    for k in range(rings):
+        for s in range(segments):
+            a, b = k * segments + s, k * segments + (s + 1) % segments
+            c, d = b + segments, a + segments
+            u0, u1 = s / segments, (s + 1) / segments
+            v0, v1 = k / rings, (k + 1) / rings
+            tris += [[a, b, c], [a, c, d]]
+            uvs += [[[u0, v0], [u1, v0], [u1, v1]], [[u0, v0], [u1, v1], [u0, v1]]]
+    uv = 0.1 + 0.8 * np.array(uvs)
+    return v, np.array(tris), uv
+
+
+def test_uv_seam_of_a_cylinder_reads_the_same_on_both_sides():
+    v, t, uv = cylinder()
+    ground = cube([-3, -3, -0.1], [3, 3, 0])
+    scene, (mid, _) = scene_of((v, t), ground)
+    sun = Sun((0.0, -1.0, 0.3), 3.0)  # the seam (facing +X) lies where the sun's cosine falls fastest
+    r = 48
+    kwargs = dict(resolution=r, lighting=uniform_sky(0.3), suns=[sun], bounces=1, margin=2)
+    target = Target(Surface(mid, v, t), uv)
+    a, b = seam_mod.seam_points(t, uv, r)
+    assert len(a) > 20 and np.abs(a[:, 0] - b[:, 0]).min() > 0.7 * r  # the seam's two sides
+    results = {}
+    for stitch in (False, True):
+        out = bake(scene, [target], stitch_seams=stitch, **kwargs)[0]
+        results[stitch] = {name: np.abs(seam_mod.lookup(out[name], a) - seam_mod.lookup(out[name], b)).max()
+                           for name in ("flat", "b0")}
+    print(results)
+    assert results[False]["flat"] > 0.02           # the seam shows without stitching
+    assert results[True]["flat"] < 1e-3 and results[True]["b0"] < 1e-3
+
+
+# --- suns against ray casting -----------------------------------------------------------
+
+
+def test_sun_shadow_edge_against_ray_casting():
+    v, t, uv = grid_plane(n=8)
+    wall = cube([-0.15, -0.6, 0], [0.15, 0.6, 0.7])
+    scene, (mid, _) = scene_of((v, t), wall)
+    direction = np.array([0.8, 0.25, 0.6])
+    direction /= np.linalg.norm(direction)
+    r, samples = 32, 16
+    out = bake(scene, [Target(Surface(mid, v, t), uv)], resolution=r, suns=[Sun(direction, math.pi)],
+               samples=samples, bounces=0, margin=0)[0]
+    # reference: the same sample points, one Embree ray each towards the sun
+    tx = texels.rasterize(np.asarray(uv)[t], r, samples)
+    points = (v[t][tx.triangle] * tx.bary[:, :, None]).sum(1)
+    blocker = trimesh.Trimesh(*wall, process=False)
+    origins = points + 1e-4 * np.array([0, 0, 1.0])
+    hit = RayMeshIntersector(blocker).intersects_any(origins, np.tile(direction, (len(points), 1)))
+    outside = (np.abs(points[:, 0]) > 0.15) | (np.abs(points[:, 1]) > 0.6)  # samples inside the wall are dropped
+    count = np.bincount(tx.texel[outside], minlength=r * r)
+    lit = np.bincount(tx.texel[outside], ~hit[outside], r * r) / np.maximum(count, 1)
+    valid = count > 0
+    assert np.array_equal(valid, out["valid"].ravel())
+    reference = (lit * direction[2]).reshape(-1)
+    ours = out["flat"][..., 0].ravel()
+    error = np.abs(ours - reference)[valid]
+    one_sample = direction[2] / samples
+    print("sun: worst texel", error.max() / one_sample, "samples; texels off", (error > 1e-4).sum(), "of", valid.sum())
+    assert 0.05 < lit[valid].mean() < 0.95  # the shadow is in the picture
+    assert error.max() <= 2 * one_sample + 1e-4 and (error > 1e-4).mean() < 0.03
+    # per sample: the engine's answer differs from Embree's only on the shadow's edge
+    p = points[outside]
+    caster = RayMeshIntersector(blocker)
+    ours_lit = lm.light.sun_visibility(scene, p, np.tile([0, 0, 1.0], (len(p), 1)), np.tile(direction, (len(p), 1)))
+    wrong = np.nonzero(ours_lit != ~hit[outside])[0]
+    print("sun: samples that differ", len(wrong), "of", len(p))
+    assert len(wrong) < 0.005 * len(p)
+    # 1 cm at up to 1.2 m from the wall's edges: the engine's plane table places triangle edges
+    # to about 0.5 degree (a sample 4 mm from the edge already can be on the other side)
+    ring = 0.01 * np.array([[math.cos(a), math.sin(a), 0] for a in np.arange(8) * math.pi / 4])
+    near = (p[wrong][:, None] + ring).reshape(-1, 3) + [0, 0, 1e-4]
+    around = caster.intersects_any(near, np.tile(direction, (len(near), 1))).reshape(-1, 8)
+    assert (around.any(1) & ~around.all(1)).all()  # each lies within 1 cm of the edge
+
+
+def test_adaptive_sun_rays_match_a_ray_per_sample(monkeypatch):
+    """One ray per texel first, per sample only around shadow edges: the same map as a ray per
+    sample here, for far fewer rays."""
+    v, t, uv = grid_plane(n=8)
+    wall = cube([-0.15, -0.6, 0], [0.15, 0.6, 0.7])
+    scene, (mid, _) = scene_of((v, t), wall)
+    rays = []
+    original = lm.light.sun_visibility
+    monkeypatch.setattr(lm.light, "sun_visibility", lambda s, p, *a, **k: rays.append(len(p)) or original(s, p, *a, **k))
+    maps = {}
+    for adaptive in (False, True):
+        rays.clear()
+        out = bake(scene, [Target(Surface(mid, v, t), uv)], resolution=32, suns=[Sun((0.8, 0.25, 0.6), math.pi)],
+                   samples=9, bounces=0, adaptive_suns=adaptive)[0]
+        maps[adaptive] = (out["flat"], sum(rays))
+    print("sun rays: per sample", maps[False][1], "adaptive", maps[True][1])
+    assert np.abs(maps[True][0] - maps[False][0]).max() < 1e-6
+    assert maps[True][1] < 0.35 * maps[False][1]
+
+
+def test_sun_rays_see_every_triangle():
+    """The hierarchy's proxies (lod 0.15) shadowed points 0.3 m away from any shadow edge in
+    this scene (a floor, a sphere, a box); sun rays are drawn with every triangle."""
+    v, t, _ = grid_plane(size=6, n=40)
+    ball = trimesh.creation.icosphere(4, 0.8)
+    ball.apply_translation((0.5, 0, 0.8))
+    box = cube([-2, -1, 0], [-1.5, 1, 1.5])
+    scene, _ = scene_of((v, t), (np.asarray(ball.vertices), np.asarray(ball.faces)), box)
+    direction = np.array([0.5, 0.3, 0.8]) / np.linalg.norm([0.5, 0.3, 0.8])
+    y = np.linspace(0.8, 1.3, 201)
+    points = np.stack([np.full_like(y, -2.6), y, 0 * y], 1)
+    ours = lm.light.sun_visibility(scene, points, np.tile([0, 0, 1.0], (len(y), 1)), np.tile(direction, (len(y), 1)))
+    everything = trimesh.util.concatenate([trimesh.Trimesh(v, t), ball, trimesh.Trimesh(*box)])
+    hit = RayMeshIntersector(everything).intersects_any(points + [0, 0, 1e-4], np.tile(direction, (len(y), 1)))
+    assert np.array_equal(ours, (~hit).astype(np.float32))
+    assert scene.lod == pytest.approx(0.15)  # the scene's own setting is left as it was
+
+
+# --- files and input checks -------------------------------------------------------------
+
+
+def test_exr_round_trip(tmp_path):
+    import OpenEXR
+
+    v, t, uv = grid_plane()
+    scene, (mid,) = scene_of((v, t))
+    out = bake(scene, [Target(Surface(mid, v, t), uv)], resolution=8, lighting=uniform_sky(), bounces=0)[0]
+    out["flat"][0, 0] = (0.25, 0.5, 0.75)
+    path = tmp_path / "plane.exr"
+    lm.write_exr(path, out)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["plane.exr"]  # no temp file left
+    with OpenEXR.File(str(path), separate_channels=True) as exr:
+        names = set(exr.channels())
+    rgb = {f"{layer}.{c}" for layer in ("flat", "b0", "b1", "b2") for c in "RGB"}
+    assert names == rgb | {"ao", "coverage"}
+    back = lm.read_exr(path)
+    for name in ("flat", "b0", "b1", "b2", "ao", "coverage"):
+        assert back[name].dtype == np.float32 and np.array_equal(back[name], out[name]), name
+    assert tuple(back["flat"][0, 0]) == (0.25, 0.5, 0.75)  # row 0 is the file's first row
+
+
+def test_bad_input_raises_clear_errors():
+    v, t, uv = grid_plane()
+    scene, (mid,) = scene_of((v, t))
+    surface = Surface(mid, v, t, name="Plane")
+    good = Target(surface, uv)
+    with pytest.raises(ValueError, match="resolution"):
+        bake(scene, [good], resolution=0)
+    with pytest.raises(ValueError, match="Plane: no lightmap UVs"):
+        bake(scene, [Target(surface, None)], resolution=8)
+    bad_uv = uv.copy()
+    bad_uv[3, 0] = np.nan
+    with pytest.raises(ValueError, match="Plane: uv has a NaN"):
+        bake(scene, [Target(surface, bad_uv)], resolution=8)
+    bad_v = v.copy()
+    bad_v[0, 2] = np.nan
+    with pytest.raises(ValueError, match="vertices has a NaN"):
+        bake(scene, [Target(Surface(mid, bad_v, t, name="Plane"), uv)], resolution=8)
+    with pytest.raises(ValueError, match="no faces"):
+        bake(scene, [Target(Surface(mid, v, t[:0], name="Plane"), uv)], resolution=8)
+    with pytest.raises(ValueError, match="lighting"):
+        bake(scene, [good], resolution=8, lighting=np.ones((5, 3)))
+    with pytest.raises(ValueError, match="basis"):
+        bake(scene, [good], resolution=8, basis="hl3")
+    with pytest.raises(ValueError, match="samples"):
+        bake(scene, [good], resolution=8, samples=0)
+    with pytest.raises(ValueError, match="no targets"):
+        bake(scene, [], resolution=8)
+
+
+def test_cancel_raises_and_returns_nothing():
+    v, t, uv = grid_plane()
+    scene, (mid,) = scene_of((v, t))
+    with pytest.raises(hemishadow.Cancelled):
+        bake(scene, [Target(Surface(mid, v, t), uv)], resolution=8, lighting=uniform_sky(), progress=lambda f: False)
+
+
+def test_rgbm_and_logluv_round_trip(tmp_path):
+    from PIL import Image
+
+    from hemishadow.lightmap import encode
+
+    rng = np.random.default_rng(3)
+    hdr = np.exp(rng.uniform(np.log(1e-2), np.log(6.0), (32, 32, 3))).astype(np.float32)
+    rgbm = encode.rgbm_decode(encode.rgbm_encode(hdr))
+    # 8 bits of a shared multiplier: error below half a step of the multiplier's range
+    assert (np.abs(rgbm - hdr) / np.maximum(hdr.max(-1, keepdims=True), 1e-3)).max() < 0.01
+    luv = encode.logluv_decode(encode.logluv_encode(hdr))
+    luminance = lambda c: (c @ encode.LOGLUV_M)[..., 1]  # noqa: E731  (the Y that LogLuv stores in 16 bits)
+    assert (np.abs(luminance(luv) / luminance(hdr) - 1)).max() < 0.005
+    assert (np.abs(luv - hdr) / hdr.max(-1, keepdims=True)).max() < 0.05
+    path = tmp_path / "flat_rgbm.png"
+    encoded = encode.rgbm_encode(hdr)
+    encode.write_png(path, encoded)
+    with Image.open(path) as image:
+        assert image.mode == "RGBA" and np.array_equal(np.asarray(image), encoded)
