@@ -454,7 +454,7 @@ impl Solver {
             return Step { base: Some((Mask::EMPTY, Mask::EMPTY)), count: 0 };
         };
         let occlude = |skip: &[u32], scratch: &mut Vec<Vec3>| match casters {
-            Some((c, _)) => c.occlude(&self.normalization, &receiver, skip, scratch),
+            Some((c, _)) => c.occlude(&self.table, &self.normalization, &receiver, skip, scratch),
             None => (Mask::EMPTY, 0),
         };
         let ((own, still), mut count) = match cached {
