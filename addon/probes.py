@@ -49,7 +49,7 @@ def scene_geometry(scene, depsgraph=None):
     depsgraph = depsgraph or bpy.context.evaluated_depsgraph_get()
     engine_scene, surfaces, world = hemishadow.Scene(), [], []
     for obj in lightmaps.blockers(scene):
-        if obj.hemishadow.enabled:
+        if getattr(getattr(obj, "hemishadow", None), "enabled", False):
             continue  # live-shaded: lit by the grid, not part of it
         data = lightmaps.read_mesh(obj, depsgraph)
         if not len(data.triangles):
