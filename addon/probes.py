@@ -180,3 +180,16 @@ def _icosphere(subdivisions):
     finally:
         bm.free()
     return verts / np.linalg.norm(verts, axis=1, keepdims=True), faces
+
+
+def lighting_at(volume, point, blockers=None):
+    """Radiance SH9 (9, 3) at a world point from the probes stored on `volume`
+    (`hemishadow.probes.evaluate`, without leaks when `blockers`, world triangles (M, 3, 3) as
+    `scene_geometry` gives them, are passed): the lighting an object in live mode can take
+    from the grid instead of the World."""
+    import hemishadow.probes as hp
+
+    data = stored(volume)
+    if data is None:
+        raise ValueError(f"{volume.name}: no baked probes on it: bake first")
+    return hp.evaluate(data, np.asarray(point, np.float64).reshape(1, 3), blockers=blockers)["sh9"][0]

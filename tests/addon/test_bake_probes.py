@@ -96,3 +96,19 @@ def test_operator_stores_and_previews(room, addon, tmp_path):
     assert names == {"Floor", "Wall"}
     room.objects["Wall"].hemishadow.enabled = True
     assert {s.name for s in addon.probes.scene_geometry(room)[1]} == {"Floor"}
+
+
+def test_lighting_at_a_point_from_the_stored_grid(room, addon, tmp_path):
+    """What a live object would take: SH9 at a point, between the stored probes; its
+    irradiance facing up is the interpolated +Z side."""
+    volume = room.objects["Volume"]
+    addon.probes.bake_probes(room, volume, bounces=0, out=str(tmp_path / "v.npz"))
+    _, _, world = addon.probes.scene_geometry(room)
+    point = np.array(volume.matrix_world.translation)
+    sh9 = addon.probes.lighting_at(volume, point, blockers=world)
+    data = addon.probes.stored(volume)
+    assert sh9.shape == (9, 3)
+    expected = hp.evaluate(data, point[None], np.array([[0.0, 0.0, 1.0]]))["cube"][0, 4]
+    assert np.allclose(hp.sh_to_cube(sh9)[4], expected, rtol=0.05)
+    with pytest.raises(ValueError, match="no baked probes"):
+        addon.probes.lighting_at(room.objects["Floor"], point)
