@@ -308,3 +308,19 @@ def test_bad_input_raises_clear_errors():
         hp.bake(scene, np.zeros((1, 3)), lighting=np.zeros((5, 3)))
     with pytest.raises(hemishadow.Cancelled):
         hp.bake(scene, np.zeros((2, 3)), lighting=sky_sh(), progress=lambda f: False)
+
+
+def test_probe_lists_evaluate_without_leaks_too():
+    """Probes given as a list (no grid): the 8 nearest, 1 / d^2, the same visibility rule."""
+    scene, surfaces, world = two_rooms()
+    pts = np.array([[x, y, z] for x in (-0.6, -0.2, 0.3, 0.7) for y in (-0.4, 0.4) for z in (0.6, 1.4)])
+    out = hp.bake(scene, pts, surfaces=surfaces, bounces=0)
+    assert out["valid"].all() and "grid_matrix" not in out
+    q = np.array([[0.15, 0.0, 1.0]])
+    n = np.array([[0.0, 0.0, 1.0]])
+    assert hp.evaluate(out, q, n)["value"][0, 0] > 0.2
+    tight = hp.evaluate(out, q, n, blockers=world)
+    assert abs(tight["value"][0, 0] / 0.05 - 1) < 0.03 and not tight["fallback"].any()
+    # a point that sees no probe at all (inside the shared wall) falls back to valid probes, flagged
+    inside = hp.evaluate(out, np.array([[0.05, 0.0, 1.0]]), blockers=world)
+    assert inside["fallback"].all()

@@ -115,7 +115,7 @@ def _bounce(scene, receivers, points, lighting, suns, bounces, offset, steps):
     direct = []
     for mesh_id, pts, nrm, ok, _, _ in receivers:
         d = np.zeros((len(pts), 3), np.float32)
-        if ok.any():
+        if ok.any() and bounces:  # with no pass, surfaces show their emission only
             d[ok] = _direct(scene, pts[ok], nrm[ok], nrm[ok][:, None], lighting, suns,
                                           np.zeros(ok.sum(), np.int64), texels.offsets(1), False, offset, steps,
                                           exact_suns=False)[0][:, 0]
