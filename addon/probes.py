@@ -83,7 +83,7 @@ def bake_probes(scene, volume=None, points=None, *, bounces=2, resolution=None, 
 
     if (volume is None) == (points is None):
         raise ValueError("give a volume object or points, not both or neither")
-    engine_scene, surfaces, _ = scene_geometry(scene)
+    engine_scene, surfaces, world = scene_geometry(scene)
     kwargs = dict(lighting=lightmaps.lighting_of(scene), suns=lightmaps.suns_of(scene), surfaces=surfaces,
                   bounces=bounces, progress=progress)
     if volume is not None:
@@ -91,6 +91,7 @@ def bake_probes(scene, volume=None, points=None, *, bounces=2, resolution=None, 
         result = hp.bake_grid(engine_scene, matrix, res, **kwargs)
     else:
         result = hp.bake(engine_scene, points, **kwargs)
+    result["notes"] = _notes(volume, result, world)
     path = output_path(volume, out)
     if path is not None:
         hp.write_npz(path, result)
@@ -98,6 +99,20 @@ def bake_probes(scene, volume=None, points=None, *, bounces=2, resolution=None, 
     if store and volume is not None:
         store_on(volume, result)
     return result, path
+
+
+def _notes(volume, result, world):
+    """What the user should know about a bake that went through: probes left out, a volume
+    with no geometry inside (its probes see the sky only)."""
+    notes = []
+    bad = int((~result["valid"]).sum())
+    if bad:
+        notes.append(f"{bad} probe(s) inside geometry, left out of interpolation")
+    pos = np.asarray(result["positions"], np.float64)
+    lo, hi = pos.min(axis=0), pos.max(axis=0)
+    if volume is not None and not ((world.max(axis=1) >= lo) & (world.min(axis=1) <= hi)).all(axis=1).any():
+        notes.append(f"{volume.name}: no geometry inside the volume: its probes see the World and distant meshes only")
+    return notes
 
 
 def store_on(obj, result):

@@ -53,6 +53,8 @@ def run(scene, args, usage_error, progress):
     volume, pts = target(scene, args, usage_error)
     if args.bounces < 0:
         raise usage_error("--bounces must be 0 or more")
+    if args.resolution is not None and min(args.resolution) < 1:
+        raise usage_error(f"--resolution must be at least 1 on every axis, got {' '.join(map(str, args.resolution))}")
     if args.out is None and not __import__("bpy").data.filepath:
         raise ValueError("the .blend file has never been saved: give --out FILE.npz")
     t0 = time.perf_counter()
@@ -60,4 +62,6 @@ def run(scene, args, usage_error, progress):
                                       out=args.out, progress=progress, store=False)
     p, bad, moved = len(result["positions"]), int((~result["valid"]).sum()), int(result["moved"].sum())
     print(f"hemishadow: {p} probes ({bad} invalid, left out; {moved} moved out of geometry) -> {path}")
+    for note in result["notes"]:
+        print(f"hemishadow: note: {note}")
     print(f"hemishadow: baked in {time.perf_counter() - t0:.2f} s")

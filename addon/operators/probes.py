@@ -46,9 +46,8 @@ class HEMISHADOW_OT_bake_probes(bpy.types.Operator):
             return {"CANCELLED"}
         finally:
             wm.progress_end()
-        bad = int((~result["valid"]).sum())
-        if bad:
-            self.report({"WARNING"}, f"{volume.name}: {bad} probe(s) inside geometry, left out of interpolation")
+        for note in result["notes"]:
+            self.report({"WARNING"}, f"{volume.name}: {note}")
         self.report({"INFO"}, f"hemishadow: baked {len(result['positions'])} probes of {volume.name}"
                               + (f" to {path}" if path else " (kept in the .blend)"))
         return {"FINISHED"}

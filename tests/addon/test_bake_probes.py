@@ -112,3 +112,21 @@ def test_lighting_at_a_point_from_the_stored_grid(room, addon, tmp_path):
     assert np.allclose(hp.sh_to_cube(sh9)[4], expected, rtol=0.05)
     with pytest.raises(ValueError, match="no baked probes"):
         addon.probes.lighting_at(room.objects["Floor"], point)
+
+
+def test_empty_far_from_geometry_zero_resolution_and_cancel(room, addon, tmp_path, capsys):
+    bpy.ops.object.empty_add(location=(0.0, 0.0, 30.0))
+    empty = bpy.context.active_object
+    empty.name = "Sky"
+    out = tmp_path / "e.npz"
+    assert addon.cli.main(["probes", "--volume", "Sky", "--resolution", "2", "2", "1", "--out", str(out)]) == 0
+    assert "no geometry inside the volume" in capsys.readouterr().out
+    assert hp.read_npz(out)["cube"].shape == (4, 6, 3)
+    assert addon.cli.main(["probes", "--volume", "Sky", "--resolution", "0", "2", "2", "--out", str(out)]) == 2
+    assert "--resolution must be at least 1" in capsys.readouterr().err
+    import hemishadow
+
+    cancelled = tmp_path / "c.npz"
+    with pytest.raises(hemishadow.Cancelled):
+        addon.probes.bake_probes(room, room.objects["Volume"], out=str(cancelled), progress=lambda f: False)
+    assert not cancelled.exists() and addon.probes.stored(room.objects["Volume"]) is None
