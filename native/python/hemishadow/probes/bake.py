@@ -15,6 +15,7 @@ from ..lightmap import bounce, cells, texels
 from . import capture, grid, validity
 from .cube import AXES, sh_to_cube
 
+_CHUNK = 4096
 GATHER_BANDS = 5  # bounce light as SH25: the cube's lobes from bands 0-4 (A_3 = 0, A_4 = -pi/24)
 
 
@@ -80,8 +81,11 @@ def bake(scene, points, *, lighting=None, suns=(), surfaces=(), bounces=2, cell=
             valid[moved] = True
     steps.step(len(pts))
 
-    open_cells = np.stack([~cells.unpack(m) for m in masks])
-    cube, sh9 = capture.environment(open_cells, None if lighting is None else lighting.astype(np.float64))
+    cube, sh9 = np.zeros((len(pts), 6, 3)), np.zeros((len(pts), 9, 3))
+    for s in range(0, len(pts), _CHUNK):  # unpacked masks: 6 KiB a probe
+        open_cells = np.stack([~cells.unpack(m[s:s + _CHUNK]) for m in masks])
+        cube[s:s + _CHUNK], sh9[s:s + _CHUNK] = capture.environment(
+            open_cells, None if lighting is None else lighting.astype(np.float64))
     for lamp in suns:
         c, s = capture.sun(scene, pts, lamp, offset)
         cube += c
