@@ -2,7 +2,6 @@
 built with bpy: a floor and a wall under a white World of strength 1."""
 
 import json
-import math
 
 import numpy as np
 import pytest

@@ -13,7 +13,7 @@ from .. import Cancelled
 from ..lightmap.bake import _bounce_receivers, _direct, _emits, _lighting, _positive_int, _suns
 from ..lightmap import bounce, cells, texels
 from . import capture, grid, validity
-from .cube import AXES, sh_to_cube
+from .cube import sh_to_cube
 
 _CHUNK = 4096
 GATHER_BANDS = 5  # bounce light as SH25: the cube's lobes from bands 0-4 (A_3 = 0, A_4 = -pi/24)

@@ -19,7 +19,8 @@ Y_UP_SIDES = (0, 1, 4, 5, 3, 2)
 SHADER = """\
 side j = (1/pi) * integral L(w) max(0, w.a_j) dw, a = (+X, -X, +Y, -Y, +Z, -Z): the radiance of a white
 Lambertian surface facing a_j (irradiance / pi). Diffuse colour = albedo * C(n) with
-C(n) = n.x^2 * (n.x < 0 ? cube[1] : cube[0]) + n.y^2 * (n.y < 0 ? cube[3] : cube[2]) + n.z^2 * (n.z < 0 ? cube[5] : cube[4]).
+C(n) = n.x^2 * (n.x < 0 ? cube[1] : cube[0]) + n.y^2 * (n.y < 0 ? cube[3] : cube[2])
+     + n.z^2 * (n.z < 0 ? cube[5] : cube[4]).
 sh9: integral of L(w) Y_k(w) dw (radiance, not divided by pi); real orthonormal SH with the Condon-Shortley phase:
 Y0 = 0.282095, Y1 = -0.488603 y, Y2 = 0.488603 z, Y3 = -0.488603 x, Y4 = 1.092548 xy, Y5 = -1.092548 yz,
 Y6 = 0.315392 (3z^2 - 1), Y7 = -1.092548 xz, Y8 = 0.546274 (x^2 - y^2).
