@@ -154,7 +154,7 @@ def principled(obj):
     """The first Principled BSDF of the object's first material, or None."""
     for slot in obj.material_slots:
         mat = slot.material
-        if mat is not None and mat.use_nodes and mat.node_tree is not None:
+        if mat is not None and mat.node_tree is not None:
             for node in mat.node_tree.nodes:
                 if node.type == "BSDF_PRINCIPLED":
                     return node
