@@ -60,6 +60,7 @@ class HEMISHADOW_OT_bake_lightmaps(bpy.types.Operator):
 
     _job = None
     _timer = None
+    _area = None
 
     @classmethod
     def poll(cls, context):
@@ -99,6 +100,7 @@ class HEMISHADOW_OT_bake_lightmaps(bpy.types.Operator):
         wm = context.window_manager
         wm.progress_begin(0, 1000)
         self._timer = wm.event_timer_add(0.1, window=context.window)
+        self._area = context.area
         wm.modal_handler_add(self)
         self._status(context, "Baking lightmaps")
         return {"RUNNING_MODAL"}
@@ -109,8 +111,8 @@ class HEMISHADOW_OT_bake_lightmaps(bpy.types.Operator):
             job.cancel()
             self._status(context, "Cancelling lightmap bake")
             return {"RUNNING_MODAL"}
-        if event.type != "TIMER" or event.timer is not self._timer:
-            return {"PASS_THROUGH"}
+        if event.type != "TIMER":
+            return {"PASS_THROUGH"}  # the UI stays usable while the worker bakes
         state = job.step()
         if state == lightmap_job.RUNNING:
             context.window_manager.progress_update(int(1000 * job.fraction))
@@ -136,8 +138,8 @@ class HEMISHADOW_OT_bake_lightmaps(bpy.types.Operator):
     def _status(self, context, text):
         if context.workspace is not None:
             context.workspace.status_text_set(text)
-        if context.area is not None:
-            context.area.header_text_set(text)
+        if self._area is not None:
+            self._area.header_text_set(text)
 
     def _end(self, context):
         wm = context.window_manager
@@ -147,8 +149,9 @@ class HEMISHADOW_OT_bake_lightmaps(bpy.types.Operator):
         wm.progress_end()
         if context.workspace is not None:
             context.workspace.status_text_set(None)
-        if context.area is not None:
-            context.area.header_text_set(None)
+        if self._area is not None:
+            self._area.header_text_set(None)
+            self._area = None
 
     def _finished(self, context, written):
         skipped = lightmaps.unsupported_lamps(context.scene)

@@ -121,6 +121,11 @@ def test_panel_settings_bake_a_collection(scene, tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["Floor.exr"]
     maps = lm.read_exr(tmp_path / "Floor.exr")
     assert set(maps) == {"flat", "ao", "coverage"} and maps["flat"].shape == (8, 8, 3)
+    settings.size_mode, settings.texel_density = "DENSITY", 2.0  # 4 m -> 8 texels per side
+    (tmp_path / "Floor.exr").unlink()
+    assert bpy.ops.hemishadow.bake_lightmaps("INVOKE_DEFAULT", basis="hl2") == {"FINISHED"}  # no window: plain
+    maps = lm.read_exr(tmp_path / "Floor.exr")
+    assert set(maps) == {"flat", "b0", "b1", "b2", "ao", "coverage"} and maps["flat"].shape == (8, 8, 3)
 
 
 def test_add_to_materials_adds_and_removes_nothing(scene, tmp_path):
