@@ -138,6 +138,7 @@ def add_to_material(mat, obj, uv_name):
         links.new(uv.outputs["UV"], texture.inputs["Vector"])
         textures[name] = texture
     bsdf = next((n for n in nodes if n.type == "BSDF_PRINCIPLED"), None)
+    group = colour = None
     if all(f"b{i}" in textures for i in range(3)):
         group = new("ShaderNodeGroup", 550, 0)
         group.node_tree = lightmap_group()
@@ -146,20 +147,23 @@ def add_to_material(mat, obj, uv_name):
         colour = _normal_colour(bsdf)
         if colour is not None:
             links.new(colour, group.inputs["Normal Color"])
-        light = group.outputs["Lightmap"]
-    else:
-        light = textures["flat"].outputs["Color"]
+    # Without a normal map `flat` is exact for the interpolated normal, where the HL2
+    # combination is not (0.789 of it under a uniform sky: the b_i are clipped at the
+    # surface); the group stays wired to the b_i maps, ready for a normal map.
+    light = group.outputs["Lightmap"] if colour is not None else textures["flat"].outputs["Color"]
     times = new("ShaderNodeMix", 800, 0)
     times.data_type, times.blend_type = "RGBA", "MULTIPLY"
     times.inputs["Factor"].default_value = 1.0
-    links.new(light, times.inputs["A"])
+    a, b = (next(s for s in times.inputs if s.identifier == f"{k}_Color") for k in "AB")  # the colour sockets
+    links.new(light, a)
     base = bsdf.inputs["Base Color"] if bsdf is not None else None
     if base is not None and base.is_linked:
-        links.new(_feeding(base), times.inputs["B"])
+        links.new(_feeding(base), b)
     else:
-        times.inputs["B"].default_value = tuple(base.default_value) if base is not None else (0.8, 0.8, 0.8, 1.0)
+        b.default_value = tuple(base.default_value) if base is not None else (0.8, 0.8, 0.8, 1.0)
     emission = new("ShaderNodeEmission", 1050, 0)
-    links.new(times.outputs["Result"], emission.inputs["Color"])
+    result = next(s for s in times.outputs if s.identifier == "Result_Color")
+    links.new(result, emission.inputs["Color"])
     output = new("ShaderNodeOutputMaterial", 1300, 0)
     output.name = output.label = "Hemishadow Lightmap Output"
     links.new(emission.outputs["Emission"], output.inputs["Surface"])

@@ -218,10 +218,13 @@ def store_image(name, rgb):
     h, w = data.shape[:2]
     image = bpy.data.images.get(name)
     if image is None or tuple(image.size) != (w, h) or not image.is_float:
-        if image is not None:
+        made = bpy.data.images.new(name, w, h, alpha=False, float_buffer=True)
+        made.colorspace_settings.name = "Non-Color"  # before the pixels: it reloads a generated image
+        if image is not None:  # a new size: materials showing the old image show the new one
+            image.user_remap(made)
             bpy.data.images.remove(image)
-        image = bpy.data.images.new(name, w, h, alpha=False, float_buffer=True)
-        image.colorspace_settings.name = "Non-Color"  # before the pixels: it reloads a generated image
+            made.name = name
+        image = made
     rgba = np.ones((h, w, 4), np.float32)
     rgba[..., :3] = data[::-1]  # Blender's pixel rows start at the bottom
     image.pixels.foreach_set(rgba.ravel())

@@ -150,6 +150,50 @@ def test_add_to_materials_adds_and_removes_nothing(scene, tmp_path):
     assert [n.name for n in active] == ["Hemishadow Lightmap Output"]
     assert bpy.ops.hemishadow.add_lightmap_nodes() == {"FINISHED"}  # a second click adds nothing
     assert sum(n.type == "GROUP" for n in tree.nodes) == 1
+    lightmaps.bake_lightmaps(scene, [floor], resolution=16, bounces=0, out_dir=str(tmp_path))  # a new size
+    textures = [n for n in tree.nodes if n.type == "TEX_IMAGE"]
+    assert {(n.image.name, tuple(n.image.size)) for n in textures} == {
+        (f"hemishadow_Floor_{m}", (16, 16)) for m in ("b0", "b1", "b2", "flat")}
+
+
+def render_centre(scene, path):
+    bpy.ops.object.camera_add(location=(0, 0, 3))
+    scene.camera = bpy.context.active_object
+    scene.render.engine = "CYCLES"
+    scene.cycles.samples = 1
+    scene.render.resolution_x = scene.render.resolution_y = 8
+    scene.view_settings.view_transform = "Standard"
+    scene.render.image_settings.file_format = "OPEN_EXR"
+    scene.render.filepath = str(path)
+    bpy.ops.render.render(write_still=True)
+    from hemishadow.environment import read_exr
+
+    return read_exr(path)[4, 4]
+
+
+@pytest.mark.parametrize("normal_map", [False, True])
+def test_added_material_renders_base_color_times_lightmap(scene, tmp_path, normal_map):
+    """Cycles renders what Add to Materials made: Base Color x flat (1.0 under a white sky)
+    without a normal map; with one, the HL2 combination (every b_i is 0.7887 here)."""
+    floor = plane(size=2.0)
+    mat = bpy.data.materials.new("Paint")
+    floor.data.materials.append(mat)
+    tree = mat.node_tree
+    bsdf = tree.nodes["Principled BSDF"]
+    base = np.array([0.5, 0.25, 1.0])
+    bsdf.inputs["Base Color"].default_value = (*base, 1.0)
+    if normal_map:
+        rgb = tree.nodes.new("ShaderNodeRGB")
+        rgb.outputs[0].default_value = (0.6, 0.45, 0.95, 1.0)
+        normal = tree.nodes.new("ShaderNodeNormalMap")
+        tree.links.new(rgb.outputs[0], normal.inputs["Color"])
+        tree.links.new(normal.outputs["Normal"], bsdf.inputs["Normal"])
+    lightmaps.bake_lightmaps(scene, [floor], resolution=8, bounces=0, out_dir=str(tmp_path))
+    assert lightmap_nodes.add_to_objects(scene, [floor], "lightmap") == (["Paint"], [])
+    scene.world.node_tree.nodes["Background"].inputs["Strength"].default_value = 0.0
+    pixel = render_centre(scene, tmp_path / "show.exr")
+    expected = base * (FLAT_B if normal_map else 1.0)
+    assert np.abs(pixel - expected).max() < 0.015, (pixel, expected)  # the film's 1 % (test_lightmaps.py)
 
 
 def test_add_to_materials_warns_on_a_material_shared_with_others(scene, tmp_path):
