@@ -63,7 +63,7 @@ def build_scene(hdri):
     import bpy
     from hemishadow.environment import builtin_hdris
 
-    bpy.ops.wm.read_factory_settings(use_empty=True)
+    bpy.ops.wm.read_homefile(use_empty=True)  # (factory settings would disable the extension)
     scene = bpy.context.scene
     parts = []
 
