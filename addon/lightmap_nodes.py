@@ -7,8 +7,6 @@ the diffuse radiance. Made on demand; nothing else in the file changes.
 
 import bpy
 
-from hemishadow.lightmap import HL2
-
 GROUP_NAME = "Hemishadow Lightmap"
 
 
@@ -34,6 +32,8 @@ def _math(tree, operation, a, b=None, kind="ShaderNodeMath", location=(0, 0)):
 
 def lightmap_group():
     """The node group (made once, then reused)."""
+    from hemishadow.lightmap import HL2  # the engine only once needed (registering never loads it)
+
     tree = bpy.data.node_groups.get(GROUP_NAME)
     if tree is not None:
         return tree
