@@ -128,6 +128,53 @@ def test_panel_settings_bake_a_collection(scene, tmp_path):
     assert set(maps) == {"flat", "b0", "b1", "b2", "ao", "coverage"} and maps["flat"].shape == (8, 8, 3)
 
 
+class Layout:
+    """Records what a panel's draw() asks for (no UI in background mode)."""
+
+    def __init__(self):
+        self.items = []
+        self.use_property_split = False
+
+    def prop(self, data, name, **_):
+        self.items.append(("prop", name))
+
+    def operator(self, idname, **_):
+        self.items.append(("operator", idname))
+
+    def label(self, text="", icon="NONE"):
+        self.items.append(("label", text))
+
+
+def test_panel_shows_settings_warnings_and_buttons(scene):
+    import types
+
+    from addon.lightmap_panel import HEMISHADOW_PT_lightmaps
+
+    floor = plane()
+    bare = plane("Bare", uv=None, location=(10, 0, 0))
+    twin = bpy.data.objects.new("Twin", floor.data)
+    scene.collection.objects.link(twin)
+
+    def draw(selected):
+        panel = types.SimpleNamespace(layout=Layout())
+        HEMISHADOW_PT_lightmaps.draw(panel, types.SimpleNamespace(scene=scene, selected_objects=selected))
+        return panel.layout.items
+
+    items = draw([floor, bare])
+    props = [name for kind, name in items if kind == "prop"]
+    assert props == ["source", "uv_name", "size_mode", "resolution", "basis", "bounces", "samples", "margin",
+                     "directory"]
+    assert ("label", "No 'lightmap' UV map: Bare") in items
+    assert ("label", "Shared meshes: Floor") in items and ("operator", "hemishadow.lightmap_single_user") in items
+    for idname in ("hemishadow.make_lightmap_uv", "hemishadow.bake_lightmaps", "hemishadow.add_lightmap_nodes"):
+        assert ("operator", idname) in items
+    scene.hemishadow_lightmaps.size_mode = "DENSITY"
+    scene.hemishadow_lightmaps.source = "COLLECTION"
+    items = draw([])
+    assert ("prop", "texel_density") in items and ("prop", "collection") in items
+    assert ("label", "0 mesh object(s)") in items
+
+
 def test_add_to_materials_adds_and_removes_nothing(scene, tmp_path):
     floor = plane()
     mat = bpy.data.materials.new("Paint")
