@@ -51,14 +51,14 @@ def scene_geometry(scene, depsgraph=None):
     for obj in lightmaps.blockers(scene):
         if getattr(getattr(obj, "hemishadow", None), "enabled", False):
             continue  # live-shaded: lit by the grid, not part of it
-        data = lightmaps.read_mesh(obj, depsgraph)
+        data = lightmaps.read_mesh(obj, depsgraph, albedo=True)
         if not len(data.triangles):
             continue
         mesh_id = engine_scene.add_mesh(data.vertices, data.triangles.astype(np.uint32))
         matrix = np.array(obj.evaluated_get(depsgraph).matrix_world, np.float64)
         engine_scene.add_instance(mesh_id, matrix)
-        albedo, emission = lightmaps.albedo_and_emission(obj)
-        surfaces.append(lm.Surface(mesh_id, data.vertices, data.triangles, matrix, albedo, emission, obj.name))
+        surfaces.append(lm.Surface(mesh_id, data.vertices, data.triangles, matrix, data.albedo, lightmaps.emission_of(obj),
+                                   obj.name))
         placed = data.vertices.astype(np.float64) @ matrix[:3, :3].T + matrix[:3, 3]
         world.append(placed[data.triangles])
     if not surfaces:
