@@ -7,6 +7,17 @@
 use crate::disk_mask::Mask;
 use crate::scene::casters::{Casters, CastersKey};
 
+/// One receiver's masks, kept from one frame to the next.
+#[derive(Clone, Copy, Default)]
+pub struct Kept {
+    /// Its own blockers.
+    pub own: Mask,
+    /// The still casters' (raw).
+    pub still: Mask,
+    /// What its result was integrated from: the same mask again gives the same result.
+    pub total: Mask,
+}
+
 pub struct CasterCache {
     key: CastersKey,
     /// Every instance's stamp at the last solve.
@@ -14,13 +25,13 @@ pub struct CasterCache {
     /// The instances whose blockers are in `masks` (ascending), and their stamps then.
     still: Vec<u32>,
     still_stamps: Vec<u64>,
-    /// Per welded receiver: its own blockers' mask and the still instances' raw mask.
-    pub masks: Vec<(Mask, Mask)>,
+    /// Per welded receiver.
+    pub masks: Vec<Kept>,
 }
 
 impl CasterCache {
     pub fn bytes(&self) -> usize {
-        self.masks.len() * std::mem::size_of::<(Mask, Mask)>() + (self.stamps.len() + self.still_stamps.len()) * 8 + self.still.len() * 4
+        self.masks.len() * std::mem::size_of::<Kept>() + (self.stamps.len() + self.still_stamps.len()) * 8 + self.still.len() * 4
     }
 }
 
@@ -58,7 +69,7 @@ impl CasterPlan {
     }
 
     /// The cache for the next frame, with this frame's masks (own and still blockers).
-    pub fn into_cache(self, casters: &Casters, masks: Vec<(Mask, Mask)>) -> CasterCache {
+    pub fn into_cache(self, casters: &Casters, masks: Vec<Kept>) -> CasterCache {
         let stamps = casters.stamps().to_vec();
         let still_stamps = self.still.iter().map(|&i| stamps[i as usize]).collect();
         CasterCache { key: casters.key().clone(), stamps, still: self.still, still_stamps, masks }

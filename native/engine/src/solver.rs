@@ -21,7 +21,7 @@ use crate::pvs::{contributing, Pvs};
 use crate::plane_table::PlaneTable;
 use crate::packets::{PacketLists, LANES};
 use crate::rasterizer::Pipeline;
-use crate::caster_reuse::{CasterCache, CasterPlan};
+use crate::caster_reuse::{CasterCache, CasterPlan, Kept};
 use crate::scene::casters::Casters;
 use crate::sh::ShBasis;
 use crate::transfer::{check_brdf, checked_downsample, checked_offset, welded_views, Receiver, Settings, View};
@@ -221,8 +221,7 @@ impl Solver {
         let cache = self.last.as_ref().and_then(|l| l.casters.as_ref());
         let plan = casters.map(|c| CasterPlan::new(cache, c));
         let keep_masks = casters.is_some() && self.blockers.reuse;
-        let masks: Vec<Mutex<(Mask, Mask)>> =
-            (0..if keep_masks { frame.positions.len() } else { 0 }).map(|_| Mutex::new((Mask::EMPTY, Mask::EMPTY))).collect();
+        let masks: Vec<Mutex<Kept>> = (0..if keep_masks { frame.positions.len() } else { 0 }).map(|_| Mutex::default()).collect();
         let k = self.coeffs();
         let mut welded = vec![0.0f32; frame.positions.len() * k];
         let (blockers, reused) = (AtomicU64::new(0), AtomicU64::new(0));
@@ -235,7 +234,8 @@ impl Solver {
                     Step { base: cache.map(|c| c.masks[r]), count: 0 }
                 }
                 _ => {
-                    let cached = cache.filter(|_| still[r] && plan.as_ref().is_some_and(|p| p.masks_valid)).map(|c| c.masks[r]);
+                    let cached = cache.zip(self.last.as_ref()).filter(|_| still[r] && plan.as_ref().is_some_and(|p| p.masks_valid));
+                    let cached = cached.map(|(c, last)| (c.masks[r], &last.transfer[r * k..(r + 1) * k]));
                     self.receiver(r, &frame, casters.zip(plan.as_ref()), cached, scratch, out)
                 }
             };
@@ -446,19 +446,20 @@ impl Solver {
     }
 
     /// Transfer of welded receiver `r` into `out`: its own blockers and the still casters'
-    /// (or `cached`, their masks from the last frame), then the moving casters, per `plan`.
+    /// (or `cached`, their masks from the last frame with the result then), then the moving
+    /// casters, per `plan`. A mask equal to the last frame's takes the last result as it is.
     #[allow(clippy::too_many_arguments)]
-    fn receiver(&self, r: usize, frame: &Frame, casters: Option<(&Casters, &CasterPlan)>, cached: Option<(Mask, Mask)>, scratch: &mut Vec<Vec3>, out: &mut [f32]) -> Step {
+    fn receiver(&self, r: usize, frame: &Frame, casters: Option<(&Casters, &CasterPlan)>, cached: Option<(Kept, &[f32])>, scratch: &mut Vec<Vec3>, out: &mut [f32]) -> Step {
         let Some(receiver) = Receiver::new(frame.positions[r], frame.normals[r], self.offset) else {
             out.fill(0.0);
-            return Step { base: Some((Mask::EMPTY, Mask::EMPTY)), count: 0 };
+            return Step { base: Some(Kept::default()), count: 0 };
         };
         let occlude = |skip: &[u32], scratch: &mut Vec<Vec3>| match casters {
             Some((c, _)) => c.occlude(&self.table, &self.normalization, &receiver, skip, scratch),
             None => (Mask::EMPTY, 0),
         };
         let ((own, still), mut count) = match cached {
-            Some(masks) => (masks, 0),
+            Some((kept, _)) => ((kept.own, kept.still), 0),
             None => {
                 let (own, count) = self.own_mask(r, frame, &receiver);
                 let (still, more) = match casters.filter(|_| own != self.disk) {
@@ -468,16 +469,21 @@ impl Solver {
                 ((own, still), count + more)
             }
         };
-        let mut mask = own;
+        let mut total = own;
         if let Some((c, plan)) = casters.filter(|_| own != self.disk) {
             let (mut cast, more) = occlude(&plan.skip_still, scratch);
             cast.or_assign(&still);
-            mask.or_assign(&c.close_pinholes(&cast));
+            total.or_assign(&c.close_pinholes(&cast));
             count += more;
         }
-        let view = frame.views.as_ref().map_or(receiver.frame.n, |v| v[r]);
-        self.quadrature.integrate(&mask, &receiver.frame, self.brdf, view, out);
-        Step { base: Some((own, still)), count }
+        match cached {
+            Some((kept, last)) if kept.total == total => out.copy_from_slice(last),
+            _ => {
+                let view = frame.views.as_ref().map_or(receiver.frame.n, |v| v[r]);
+                self.quadrature.integrate(&total, &receiver.frame, self.brdf, view, out);
+            }
+        }
+        Step { base: Some(Kept { own, still, total }), count }
     }
 
     /// The mask of receiver `r`'s own blockers and their count. The hot loop is compiled
@@ -554,7 +560,7 @@ impl Solver {
 /// What computing (or reusing) one receiver left: the masks of its own and of the still
 /// casters' blockers (for the next frame), and how many blockers it rasterized.
 struct Step {
-    base: Option<(Mask, Mask)>,
+    base: Option<Kept>,
     count: u64,
 }
 
