@@ -181,6 +181,20 @@ impl PyScene {
         Ok(Array1::from_vec(valid).into_pyarray(py))
     }
 
+    /// bool (P,): whether anything crosses the segment from each point to its target.
+    fn occluded<'py>(
+        &mut self,
+        py: Python<'py>,
+        points: PyReadonlyArray2<f32>,
+        targets: PyReadonlyArray2<f32>,
+        offset: Option<f32>,
+    ) -> PyResult<Bound<'py, PyArray1<bool>>> {
+        let (p, t) = (rows3(&points, "points")?, rows3(&targets, "targets")?);
+        let inner = &mut self.inner;
+        let hit = run(py, || inner.occluded(&p, &t, offset))?;
+        Ok(Array1::from_vec(hit).into_pyarray(py))
+    }
+
     #[pyo3(signature = (points, normals, bands, offset, progress=None))]
     fn gather<'py>(
         &mut self,

@@ -17,6 +17,7 @@ pub mod gather;
 pub mod ordered;
 pub mod pinholes;
 pub mod receivers;
+pub mod segments;
 pub mod top;
 pub mod traverse;
 
@@ -380,6 +381,25 @@ impl Scene {
                 walk.run(&receiver, scratch, &mut sink);
                 receivers::is_valid(&sink.back)
             })
+            .collect())
+    }
+
+    /// Per segment from `points[i]` to `targets[i]`, whether any triangle of the scene crosses
+    /// it (exact tests on every triangle, no proxies); `offset` (a fraction of `size()`, as for
+    /// receivers) is left out at both ends. For lamps at a finite distance (`segments`).
+    pub fn occluded(&mut self, points: &[Vec3], targets: &[Vec3], offset: Option<f32>) -> Result<Vec<bool>> {
+        receivers::check(points, None)?;
+        if targets.len() != points.len() {
+            return Err(Error::invalid(format!("targets has {} rows but points has {}", targets.len(), points.len())));
+        }
+        receivers::check(targets, None)?;
+        let offset = receivers::offset(offset, self.size())?;
+        let (trees, positions) = self.walk_parts();
+        let segments = segments::Segments::new(&trees, &positions, &self.instances, self.top.as_ref().expect("prepared"));
+        Ok(points
+            .par_iter()
+            .zip(targets)
+            .map_init(Vec::new, |stack, (p, t)| segments.occluded(*p, *t, offset, stack))
             .collect())
     }
 

@@ -25,10 +25,12 @@ from . import basis, cells
 class Sun:
     """A sun lamp: `direction` towards the light (world), `strength` the irradiance in W/m^2
     on a surface facing it (scalar or RGB, Blender's Strength x colour), `angle` its angular
-    diameter in radians (its disk is sampled across a texel's samples)."""
+    diameter in radians (its disk is sampled across a texel's samples). indirect_only: it
+    lights bounce surfaces but not the maps (a lamp the game engine renders in real time)."""
     direction: tuple
     strength: object = 1.0
     angle: float = 0.0
+    indirect_only: bool = False
 
 
 def _fibonacci(count):
