@@ -190,9 +190,31 @@ def suns_of(scene):
     return out
 
 
+def lamps_of(scene):
+    """Point, spot and area lamps as the engine's lamps (size scaled by the object's scale)."""
+    import hemishadow.lightmap as lm
+
+    out = []
+    for obj in lamps.visible_lamps(scene, ("POINT", "SPOT", "AREA")):
+        m, light = obj.matrix_world, obj.data
+        pos, power = np.array(m.translation, np.float64), lamps.lamp_power_color(light)
+        axis = [np.array(m.to_3x3().col[k], np.float64) for k in range(3)]
+        if light.type == "POINT":
+            out.append(lm.Point(pos, power, float(light.shadow_soft_size)))
+        elif light.type == "SPOT":
+            out.append(lm.Spot(pos, -axis[2], power, float(light.shadow_soft_size), float(light.spot_size),
+                               float(light.spot_blend)))
+        else:
+            sx, sy = np.linalg.norm(axis[0]), np.linalg.norm(axis[1])
+            y = light.size_y if light.shape in ("RECTANGLE", "ELLIPSE") else light.size
+            shape = "ELLIPSE" if light.shape in ("DISK", "ELLIPSE") else "RECTANGLE"  # scale may stretch it
+            out.append(lm.Area(pos, -axis[2], axis[0], power, shape, float(light.size) * sx, float(y) * sy))
+    return out
+
+
 def unsupported_lamps(scene):
-    """Names of lamps the bake leaves out (point, spot, area: docs/lightmaps.md)."""
-    return [obj.name for obj in lamps.visible_lamps(scene, ("POINT", "SPOT", "AREA"))]
+    """Names of lamps the bake leaves out: none since point, spot and area lamps are baked."""
+    return []
 
 
 def _safe(name):
@@ -261,7 +283,7 @@ def bake_lightmaps(scene, objects, *, uv_name=DEFAULT_UV, resolution=256, basis=
         if obj in objects:
             targets.append(lm.Target(surfaces[obj.name], data.uv, data.corner_normals, data.tangents, name=obj.name))
     others = [s for name, s in surfaces.items() if name not in {t.name for t in targets}]
-    maps = lm.bake(scene_, targets, resolution=resolution, lighting=lighting_of(scene), suns=suns_of(scene),
+    maps = lm.bake(scene_, targets, resolution=resolution, lighting=lighting_of(scene), suns=suns_of(scene), lamps=lamps_of(scene),
                    surfaces=others, bounces=bounces, samples=samples, margin=margin, basis=basis, progress=progress)
     folder = output_folder(out_dir)
     written = {}
