@@ -298,7 +298,7 @@ def test_sun_shadow_edge_against_ray_casting():
     ours_lit = lm.light.sun_visibility(scene, p, np.tile([0, 0, 1.0], (len(p), 1)), np.tile(direction, (len(p), 1)))
     wrong = np.nonzero(ours_lit != ~hit[outside])[0]
     print("sun: samples that differ", len(wrong), "of", len(p))
-    assert len(wrong) < 0.005 * len(p)
+    assert len(wrong) <= 2  # exact segments (the masks at lod 0 missed 27 of 14,864 near edges)
     # 1 cm at up to 1.2 m from the wall's edges: the engine's plane table places triangle edges
     # to about 0.5 degree (a sample 4 mm from the edge already can be on the other side)
     ring = 0.01 * np.array([[math.cos(a), math.sin(a), 0] for a in np.arange(8) * math.pi / 4])

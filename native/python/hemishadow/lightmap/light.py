@@ -9,8 +9,8 @@ The transfer vectors of `Scene.transfer` cannot clip a tilted lobe at the surfac
 
 Environment: radiance per cell from the lighting rotated into each receiver's frame (fitted
 exactly, band by band, on directions over the sphere). Suns: one exact shadow ray per sample,
-a visibility query whose normal is tilted so that the sun's direction passes through the
-centre of one of the mask's four central cells, drawn with every triangle (lod 0).
+the engine's segment test to a point beyond the scene (bounce receivers: a mask query through
+the scene's proxies, whose normal is tilted so that the sun passes through a central cell).
 """
 
 from dataclasses import dataclass
@@ -129,17 +129,25 @@ def engine_frame_f32(q):
 
 
 def sun_visibility(scene, points, ng, directions, offset=None, exact=True):
-    """1.0 where the ray from each point towards `directions` (P, 3) is open, else 0.0 (the
-    four central cells' mean where no query normal was found, which does not happen for
-    unit directions). exact: with every triangle (lod 0); else with the scene's proxies."""
+    """1.0 where the ray from each point towards `directions` (P, 3) is open, else 0.0.
+    exact: the engine's segment test (`Scene.occluded`, every triangle, no proxies) to a
+    point beyond the scene; else a mask query with the scene's proxies (`_mask_visibility`,
+    soft bounce light only)."""
+    if not exact:
+        return _mask_visibility(scene, points, ng, directions, offset)
+    size = scene.size
+    lift = size * (1e-4 if offset is None else offset)
+    start = points + ng * lift
+    far = start + directions * (2.0 * size + 1.0)
+    return (~scene.occluded(start, far, offset=offset)).astype(np.float32)
+
+
+def _mask_visibility(scene, points, ng, directions, offset):
+    """A visibility query whose normal is tilted so that the direction passes through the
+    centre of one of the mask's four central cells (the four cells' mean where no normal was
+    found, which does not happen for unit directions)."""
     q, cell = shadow_normals(directions, ng)
-    lod = scene.lod
-    if exact:
-        scene.lod = 0.0  # every triangle: the hierarchy's proxies cast false sun shadows (docs/lightmaps.md)
-    try:
-        blocked = cells.unpack(scene.visibility(points, q, offset=offset))
-    finally:
-        scene.lod = lod
+    blocked = cells.unpack(scene.visibility(points, q, offset=offset))
     found = cell >= 0
     lit = np.where(found, ~blocked[np.arange(len(q)), np.maximum(cell, 0)], False).astype(np.float32)
     if not found.all():
