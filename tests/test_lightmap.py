@@ -345,6 +345,20 @@ def test_sun_rays_see_every_triangle():
     assert scene.lod == pytest.approx(0.15)  # the scene's own setting is left as it was
 
 
+def test_engine_lobe_integrals_match_the_numpy_quadrature():
+    """Scene.lobe_integrals (packed masks, in the engine) against cells.lobe_weights."""
+    from hemishadow.lightmap import cells
+    rng = np.random.default_rng(5)
+    masks = rng.integers(0, 2 ** 63, (50, 16), dtype=np.uint64) & rng.integers(0, 2 ** 63, (50, 16), dtype=np.uint64)
+    lobes = rng.normal(size=(50, 4, 3)).astype(np.float32)
+    lobes /= np.linalg.norm(lobes, axis=-1, keepdims=True)
+    values = rng.normal(size=(1024, 5)).astype(np.float32)
+    ours = hemishadow._native.Scene.lobe_integrals(masks, lobes, cells.moments()[:, :3].astype(np.float32), values)
+    seen = cells.lobe_weights(lobes) * (~cells.unpack(masks))[:, None, :]
+    ref = seen @ values
+    assert np.abs(ours - ref).max() < 1e-4 * np.abs(ref).max()
+
+
 # --- point, spot and area lamps ----------------------------------------------------------
 
 
