@@ -14,6 +14,7 @@ pub mod affine;
 pub mod casters;
 pub mod clusters;
 pub mod gather;
+pub mod lobes;
 pub mod ordered;
 pub mod pinholes;
 pub mod receivers;

@@ -78,7 +78,7 @@ def _direct(scene, points, ng, lobes, lighting, suns, index, offsets, want_sh, o
     sh = np.zeros((p, 4, 3), np.float32) if want_sh else None
     for start in range(0, p, _CHUNK):
         s = slice(start, start + _CHUNK)
-        m, a, h = light.environment(cells.unpack(masks[s]), t[s], b[s], ng[s], lobes[s], lighting, want_sh)
+        m, a, h = light.environment(masks[s], t[s], b[s], ng[s], lobes[s], lighting, want_sh)
         maps[s], ao[s] = m, a
         if want_sh:
             sh[s] = h

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .. import sh_basis
+from .. import _native, sh_basis
 from . import basis, cells
 
 
@@ -52,29 +52,30 @@ def local_lighting(lighting, t, b, n):
     return np.einsum("kd,pdc->pkc", fit, radiance).astype(np.float32)
 
 
-def environment(blocked, t, b, n, lobes, lighting, want_sh=False):
+def environment(masks, t, b, n, lobes, lighting, want_sh=False):
     """Irradiance / pi (P, L, 3) for unit lobe directions (P, L, 3) (world) of receivers with
-    masks `blocked` (P, 1024) taken in the engine frame (t, b, n) of their geometric normals;
-    the open fraction of the first lobe (P,); and with want_sh the L1 SH (P, 4, 3) of the
-    incident radiance / pi (world), else None."""
+    packed masks (P, 16) uint64 taken in the engine frame (t, b, n) of their geometric
+    normals; the open fraction of the first lobe (P,); and with want_sh the L1 SH (P, 4, 3) of
+    the incident radiance / pi (world), else None. The lobe integrals over the open cells run
+    in the engine (`Scene.lobe_integrals`, `cells.lobe_weights` in numpy is the same)."""
     local = np.stack([(lobes * t[:, None]).sum(-1), (lobes * b[:, None]).sum(-1), (lobes * n[:, None]).sum(-1)], -1)
-    weights = cells.lobe_weights(local)                         # (P, L, 1024)
-    open_cells = (~blocked).astype(np.float32)
-    seen = weights * open_cells[:, None, :]
-    ao = seen[:, 0].sum(-1) / np.maximum(weights[:, 0].sum(-1), 1e-30)
+    bands = 0 if lighting is None else int(round(np.sqrt(len(lighting))))
+    y_cells = sh_basis(cells.radiance_directions(), bands) if bands else np.zeros((cells.CELLS, 0), np.float32)
+    values = np.ascontiguousarray(np.concatenate([y_cells, np.ones((cells.CELLS, 1), np.float32)], axis=1), np.float32)
+    moments = np.ascontiguousarray(cells.moments()[:, :3], np.float32)
+    out = _native.Scene.lobe_integrals(np.ascontiguousarray(masks), np.ascontiguousarray(local, np.float32), moments,
+                                       values)
+    ao = out[:, 0, -1] / cells.open_clamped_cosine(local[:, 0, 2]).astype(np.float32)
     if lighting is None:
-        return np.zeros(lobes.shape[:2] + (3,), np.float32), ao, (np.zeros((len(t), 4, 3), np.float32) if want_sh else None)
-    bands = int(round(np.sqrt(len(lighting))))
-    y_cells = sh_basis(cells.radiance_directions(), bands)     # (1024, K)
+        return np.zeros(lobes.shape[:2] + (3,), np.float32), ao.astype(np.float32), (np.zeros((len(t), 4, 3), np.float32) if want_sh else None)
     lit = local_lighting(lighting, t, b, n)                     # (P, K, 3)
-    p, l = seen.shape[:2]
-    transfer = (seen.reshape(p * l, -1) @ y_cells).reshape(p, l, -1)
-    maps = np.einsum("plk,pkc->plc", transfer, lit) / np.float32(np.pi)
+    maps = np.einsum("plk,pkc->plc", out[..., :-1], lit) / np.float32(np.pi)
     sh = None
     if want_sh:
-        moments = cells.moments().astype(np.float32)
-        per_cell = np.stack([basis.Y00 * moments[:, 3], -basis.C1 * moments[:, 1], basis.C1 * moments[:, 2],
-                             -basis.C1 * moments[:, 0]], axis=1)  # integral of Y_k over each cell
+        open_cells = (~cells.unpack(masks)).astype(np.float32)
+        moments4 = cells.moments().astype(np.float32)
+        per_cell = np.stack([basis.Y00 * moments4[:, 3], -basis.C1 * moments4[:, 1], basis.C1 * moments4[:, 2],
+                             -basis.C1 * moments4[:, 0]], axis=1)  # integral of Y_k over each cell
         radiance = np.einsum("ck,pkj->pcj", y_cells, lit)
         local_sh = np.einsum("pc,pcj,ck->pkj", open_cells, radiance, per_cell)
         sh = basis.l1_to_world(local_sh, t, b, n) / np.float32(np.pi)
