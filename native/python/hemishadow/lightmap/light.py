@@ -49,7 +49,8 @@ def local_lighting(lighting, t, b, n):
     fit = np.linalg.pinv(sh_basis(dirs, bands).astype(np.float64))  # (K, 3K)
     world = dirs[None, :, 0:1] * t[:, None] + dirs[None, :, 1:2] * b[:, None] + dirs[None, :, 2:3] * n[:, None]
     radiance = (sh_basis(world.reshape(-1, 3), bands) @ lighting).reshape(len(t), 3 * k, 3)
-    return np.einsum("kd,pdc->pkc", fit, radiance).astype(np.float32)
+    flat = radiance.transpose(1, 0, 2).reshape(3 * k, -1)  # one BLAS product, not einsum's loops
+    return (fit.astype(np.float32) @ flat).reshape(k, len(t), 3).transpose(1, 0, 2).astype(np.float32)
 
 
 def environment(masks, t, b, n, lobes, lighting, want_sh=False):
@@ -69,7 +70,7 @@ def environment(masks, t, b, n, lobes, lighting, want_sh=False):
     if lighting is None:
         return np.zeros(lobes.shape[:2] + (3,), np.float32), ao.astype(np.float32), (np.zeros((len(t), 4, 3), np.float32) if want_sh else None)
     lit = local_lighting(lighting, t, b, n)                     # (P, K, 3)
-    maps = np.einsum("plk,pkc->plc", out[..., :-1], lit) / np.float32(np.pi)
+    maps = np.matmul(out[..., :-1], lit) / np.float32(np.pi)
     sh = None
     if want_sh:
         open_cells = (~cells.unpack(masks)).astype(np.float32)
