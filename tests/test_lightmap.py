@@ -359,6 +359,25 @@ def test_engine_lobe_integrals_match_the_numpy_quadrature():
     assert np.abs(ours - ref).max() < 1e-4 * np.abs(ref).max()
 
 
+def test_one_rasterization_gives_mask_and_validity():
+    """Scene.visibility_valid (one depth-buffer pass) against visibility and valid: receivers
+    in a closed room with a box on the floor (some inside it), where every mask needs both."""
+    room = trimesh.creation.box(bounds=[[-2, -2, -0.1], [2, 2, 2.5]])
+    room.invert()  # seen from inside: front faces
+    box = cube([-0.5, -0.5, -0.1], [0.5, 0.5, 0.8])
+    scene, _ = scene_of((np.asarray(room.vertices), np.asarray(room.faces)), box)
+    rng = np.random.default_rng(7)
+    points = np.c_[rng.uniform(-1.9, 1.9, (3000, 2)), np.full(3000, -0.1)]
+    normals = np.tile([0, 0, 1.0], (3000, 1))
+    masks, valid = scene.visibility_valid(points, normals)
+    ref_masks, ref_valid = scene.visibility(points, normals), scene.valid(points, normals)
+    inside = (np.abs(points[:, :2]) < 0.5).all(1)
+    assert inside.any() and np.array_equal(valid, ref_valid) and not valid[inside].any()
+    differ = np.bitwise_count(masks ^ ref_masks).sum(1)
+    print("visibility_valid: bits that differ, mean", differ.mean(), "worst", differ.max())
+    assert differ.max() <= 8  # of about 800 cells: edges rounded the other way
+
+
 # --- point, spot and area lamps ----------------------------------------------------------
 
 

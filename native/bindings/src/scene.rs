@@ -168,6 +168,22 @@ impl PyScene {
         Ok(Array2::from_shape_vec((p.len(), words), flat).expect("P x words").into_pyarray(py))
     }
 
+    /// Masks (P, 16) uint64 and validity (P,) from one rasterization each.
+    fn visibility_valid<'py>(
+        &mut self,
+        py: Python<'py>,
+        points: PyReadonlyArray2<f32>,
+        normals: PyReadonlyArray2<f32>,
+        offset: Option<f32>,
+    ) -> PyResult<(Bound<'py, PyArray2<u64>>, Bound<'py, PyArray1<bool>>)> {
+        let (p, n) = (rows3(&points, "points")?, rows3(&normals, "normals")?);
+        let inner = &mut self.inner;
+        let (masks, valid) = run(py, || inner.visibility_valid(&p, &n, offset))?;
+        let words = engine::disk_mask::MASK_WORDS;
+        let flat: Vec<u64> = masks.iter().flat_map(|m| m.0).collect();
+        Ok((Array2::from_shape_vec((p.len(), words), flat).expect("P x words").into_pyarray(py), Array1::from_vec(valid).into_pyarray(py)))
+    }
+
     fn valid<'py>(
         &mut self,
         py: Python<'py>,

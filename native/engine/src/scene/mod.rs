@@ -404,6 +404,29 @@ impl Scene {
             .collect())
     }
 
+    /// `visibility` and `valid` from one rasterization per receiver (the ordered mode's depth
+    /// buffer): the mask is the covered cells with pinholes closed as `visibility` closes them.
+    /// Cheaper than both calls where most receivers need the validity (closed rooms).
+    pub fn visibility_valid(&mut self, points: &[Vec3], normals: &[Vec3], offset: Option<f32>) -> Result<(Vec<Mask>, Vec<bool>)> {
+        receivers::check(points, Some(normals))?;
+        let offset = receivers::offset(offset, self.size())?;
+        let table = PlaneTable::shared(self.table_resolution)?;
+        let (trees, positions) = self.walk_parts();
+        let walk = Walk { trees: &trees, positions: &positions, instances: &self.instances, top: self.top.as_ref().expect("prepared"), lod: self.lod, exclude: &[] };
+        let radiance: Vec<Option<&[Rgb]>> = vec![None; self.instances.len()];
+        let full = disk();
+        Ok(points
+            .par_iter()
+            .zip(normals)
+            .map_init(Vec::new, |scratch, (p, n)| {
+                let receiver = receivers::receiver(*p, *n, offset);
+                let mut sink = DepthSink::new(&table, &radiance);
+                walk.run(&receiver, scratch, &mut sink);
+                (pinholes::close(&sink.covered(), &full, traverse::PINHOLE_NEIGHBOURS), receivers::is_valid(&sink.back))
+            })
+            .unzip())
+    }
+
     /// Ordered mode: the SH projection (bands^2 x 3 per point, coefficient-major) of the
     /// radiance of the nearest blocker in every direction, over the receiver's hemisphere, or
     /// over the whole sphere when `normals` is None.

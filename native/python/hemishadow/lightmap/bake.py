@@ -21,6 +21,7 @@ from .geometry import Surface, Target
 BASES = ("hl2", "sh", "flat")
 _CHUNK = 2048
 _LAMP_CHUNK = 8192
+_MASK_CHUNK = 8192
 
 
 def _positive_int(value, what, minimum=1):
@@ -207,8 +208,8 @@ def bake(scene, targets, *, resolution, lighting=None, suns=(), lamps=(), surfac
     steps = _Progress(progress, len(points) + vertex_count * (1 + bounces) + len(points) * bool(receivers))
     usable = np.linalg.norm(ng, axis=1) > 0.5  # zero-area triangles have no normal
     ng = np.where(usable[:, None], ng, n)
-    masks = scene.visibility(points, ng, offset=offset)
-    valid = _valid(scene, points, ng, masks, offset) & usable
+    masks, valid = _masks_and_valid(scene, points, ng, offset)
+    valid &= usable
     r = max(sizes)
     texel_id = np.concatenate([(k * r + g[0].texel // sz) * r + g[0].texel % sz
                                for k, (g, sz) in enumerate(zip(geo, sizes))])  # (target, row, col) in a T x r x r grid
@@ -263,14 +264,27 @@ def _indirect(scene, receivers, points, ng, valid, texel_id, lighting, suns, lam
     return scene.gather(points[rep], ng[rep], bands=bounce.BANDS, offset=offset)[of_sample]
 
 
-def _valid(scene, points, ng, masks, offset):
-    """`Scene.valid` where it can be False: a receiver is invalid when back faces cover more
-    than half its disk's cells, so one with at most half its cells blocked is valid."""
+def _masks_and_valid(scene, points, ng, offset):
+    """Raw masks (P, 16) and validity (P,) of the samples. `Scene.valid` is asked only where
+    more than 45 % of a mask is blocked (it cannot fail below half), a second rasterization;
+    in chunks where most samples need it (closed rooms), one `Scene.visibility_valid` call
+    gives both. Chunks follow texel order, so each chunk's need predicts the next one's."""
+    masks = np.empty((len(points), 16), np.uint64)
     valid = np.ones(len(points), bool)
-    maybe = np.bitwise_count(masks).sum(axis=1) > 0.45 * cells.directions().any(axis=1).sum()
-    if maybe.any():
-        valid[maybe] = scene.valid(points[maybe], ng[maybe], offset=offset)
-    return valid
+    limit = 0.45 * cells.directions().any(axis=1).sum()
+    combined = False
+    for start in range(0, len(points), _MASK_CHUNK):
+        s = slice(start, start + _MASK_CHUNK)
+        if combined:
+            masks[s], valid[s] = scene.visibility_valid(points[s], ng[s], offset=offset)
+            maybe = np.bitwise_count(masks[s]).sum(axis=1) > limit
+        else:
+            masks[s] = scene.visibility(points[s], ng[s], offset=offset)
+            maybe = np.bitwise_count(masks[s]).sum(axis=1) > limit
+            if maybe.any():
+                valid[s][maybe] = scene.valid(points[s][maybe], ng[s][maybe], offset=offset)
+        combined = maybe.mean() > 0.5
+    return masks, valid
 
 
 def _representatives(texel_id, valid):
