@@ -106,6 +106,7 @@ def _direct(scene, points, ng, lobes, lighting, suns, index, offsets, want_sh, o
             maps[s] += m
             if want_sh:
                 sh[s] += h
+            progress.step(0)  # lets a cancel through between chunks
     return maps, ao, sh
 
 
