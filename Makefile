@@ -1,5 +1,5 @@
 # Entry points for a fresh machine: `make demo` and `make test` install everything first.
-.PHONY: setup setup-all demo demo-cli test test-platforms clean extension extensions
+.PHONY: setup setup-all demo demo-lightmaps demo-cli test test-platforms clean extension extensions
 
 PY := .venv/bin/python
 
@@ -17,6 +17,13 @@ setup-all:
 demo: setup
 	$(PY) scripts/build_extension.py --if-stale
 	$(PY) scripts/demo_blender.py
+
+# Lightmaps (issue 11): a room corner with a box under a Blender HDRI and a sun, baked headless
+# through the installed extension and rendered by Cycles, path traced and from the lightmaps
+# alone: out/demo_lightmaps/*.png (scripts/demo_lightmaps.py).
+demo-lightmaps: setup
+	$(PY) scripts/build_extension.py --if-stale
+	$(PY) scripts/demo_lightmaps.py
 
 # The engine alone from the command line: spot.obj (ships in tests/assets) lit by Blender's
 # "forest" HDRI (ships with the bpy module), written to out/spot.glb and out/spot.npz.

@@ -48,7 +48,7 @@ def build_parser() -> argparse.ArgumentParser:
         "  ... bake --help\n"
         "progress goes to stderr; Ctrl-C cancels and saves nothing\n"
         "exit codes: 0 done, 1 the work failed, 2 bad command line, 130 cancelled"))
-    commands = parser.add_subparsers(dest="command", metavar="{compute,bake,lightmaps}", parser_class=_Parser)
+    commands = parser.add_subparsers(dest="command", metavar="{compute,bake,lightmaps,probes}", parser_class=_Parser)
 
     compute = commands.add_parser("compute", help="compute one frame into the attributes",
                                   description="Compute one frame into the attributes hemishadow_radiance and "
@@ -71,6 +71,9 @@ def build_parser() -> argparse.ArgumentParser:
     from . import lightmaps_cli
 
     lightmaps_cli.add_parser(commands)
+    from . import probes_cli
+
+    probes_cli.add_parser(commands)
     return parser
 
 
@@ -91,6 +94,8 @@ def main(argv) -> int:
         scene = _scene(args.scene)
         if args.command == "lightmaps":
             return _lightmaps(scene, args)
+        if args.command == "probes":
+            return _probes(scene, args)
         objects = _objects(scene, args.objects)
         run = _compute if args.command == "compute" else _bake
         if not run(scene, objects, args):
@@ -225,6 +230,23 @@ def _lightmaps(scene, args) -> int:
     with interrupts:
         try:
             lightmaps_cli.run(scene, found, args, bar)
+        except hemishadow.Cancelled:
+            print("hemishadow: cancelled (Ctrl-C): nothing written", file=sys.stderr)
+            return 130
+        finally:
+            bar.close()
+    return 0
+
+
+def _probes(scene, args) -> int:
+    import hemishadow
+
+    from . import probes_cli
+
+    bar, interrupts = _progress_bar("probes")
+    with interrupts:
+        try:
+            probes_cli.run(scene, args, lambda m: UsageError(f"{PROG}: error: {m}"), bar)
         except hemishadow.Cancelled:
             print("hemishadow: cancelled (Ctrl-C): nothing written", file=sys.stderr)
             return 130

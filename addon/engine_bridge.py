@@ -26,6 +26,7 @@ import numpy as np
 from . import casters as shadow_casters
 from . import mesh_io
 from . import objects as scope
+from . import probe_lighting
 
 
 @dataclass
@@ -264,16 +265,20 @@ def _named(name):
 
 def _shade(obj, scene, transfer, lighting=None, vertices=None):
     """Environment and suns (`lighting`, default the scene's) plus the lamps at `vertices`
-    (default: the positions of the object's last computation)."""
+    (default: the positions of the object's last computation); for an object with Probe
+    Lighting, the probes' light at its place instead (probe_lighting.py)."""
     import hemishadow
 
     from . import lighting as scene_lights
 
-    if lighting is None:
-        lighting = scene_lighting(scene, obj.hemishadow.band_count)
     if vertices is not None:
         _positions[obj.session_uid] = vertices
-    radiance = scene_lights.shade(scene, transfer, lighting, _albedo(obj), _positions.get(obj.session_uid))
+    positions, found = _positions.get(obj.session_uid), None
+    if probe_lighting.volume_of(obj) is not None:  # the grid's light here: World and lamps as baked
+        lighting, found = probe_lighting.lighting(obj, scene, positions, obj.hemishadow.band_count), []
+    elif lighting is None:
+        lighting = scene_lighting(scene, obj.hemishadow.band_count)
+    radiance = scene_lights.shade(scene, transfer, lighting, _albedo(obj), positions, found)
     return Result(transfer, hemishadow.ambient_occlusion(transfer), radiance)
 
 
@@ -463,6 +468,7 @@ def forget(obj=None):
         _entries.clear()
         _positions.clear()
         shadow_casters.forget()
+        probe_lighting.forget()
     else:
         _entries.pop(obj.session_uid, None)
         _positions.pop(obj.session_uid, None)

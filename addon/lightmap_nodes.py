@@ -7,8 +7,6 @@ the diffuse radiance. Made on demand; nothing else in the file changes.
 
 import bpy
 
-from hemishadow.lightmap import HL2
-
 GROUP_NAME = "Hemishadow Lightmap"
 
 
@@ -34,6 +32,8 @@ def _math(tree, operation, a, b=None, kind="ShaderNodeMath", location=(0, 0)):
 
 def lightmap_group():
     """The node group (made once, then reused)."""
+    from hemishadow.lightmap import HL2  # the engine only once needed (registering never loads it)
+
     tree = bpy.data.node_groups.get(GROUP_NAME)
     if tree is not None:
         return tree
@@ -74,3 +74,129 @@ def lightmap_group():
     tree.links.new(inverse.outputs[0], result.inputs["Scale"])
     tree.links.new(result.outputs[0], outputs.inputs["Lightmap"])
     return tree
+
+
+FRAME_NAME = "Hemishadow Lightmap"
+
+
+def baked_images(obj):
+    """The object's baked images by map name ('b0'.., 'flat'); {} when not baked."""
+    from .lightmaps import IMAGE_PREFIX
+
+    found = {}
+    for name in ("flat", "b0", "b1", "b2"):
+        image = bpy.data.images.get(f"{IMAGE_PREFIX}{obj.name}_{name}")
+        if image is not None:
+            found[name] = image
+    return found
+
+
+def _feeding(socket):
+    return socket.links[0].from_socket if socket.is_linked else None
+
+
+def _normal_colour(bsdf):
+    """The colour feeding the Principled BSDF's Normal Map node, or None."""
+    normal = bsdf.inputs.get("Normal") if bsdf is not None else None
+    source = _feeding(normal) if normal is not None else None
+    if source is not None and source.node.type == "NORMAL_MAP":
+        return _feeding(source.node.inputs["Color"])
+    return None
+
+
+def add_to_material(mat, obj, uv_name):
+    """Adds, in a frame, the object's baked maps on UV map `uv_name` combined by the group,
+    times the Base Color (its texture when one feeds it), as an Emission into a NEW Material
+    Output made active. Nothing of the material is removed or relinked: making the old
+    output active again restores it. Returns False when the frame is there already."""
+    images = baked_images(obj)
+    if not images:
+        raise ValueError(f"{obj.name}: no baked lightmap images (hemishadow_{obj.name}_*): bake it first")
+    if mat.node_tree is None:  # Blender before 5.0: materials without nodes
+        mat.use_nodes = True
+    tree = mat.node_tree
+    if tree.nodes.get(FRAME_NAME) is not None:
+        return False
+    nodes, links = tree.nodes, tree.links
+    frame = nodes.new("NodeFrame")
+    frame.name = frame.label = FRAME_NAME
+    x0 = max((n.location.x for n in nodes), default=0.0) + 400.0
+    made = []
+
+    def new(kind, x, y):
+        node = nodes.new(kind)
+        node.location = (x0 + x, y)
+        made.append(node)
+        return node
+
+    uv = new("ShaderNodeUVMap", 0, 0)
+    uv.uv_map = uv_name
+    textures = {}
+    for i, name in enumerate(n for n in ("b0", "b1", "b2", "flat") if n in images):
+        texture = new("ShaderNodeTexImage", 250, -300 * i)
+        texture.image, texture.interpolation = images[name], "Linear"
+        links.new(uv.outputs["UV"], texture.inputs["Vector"])
+        textures[name] = texture
+    bsdf = next((n for n in nodes if n.type == "BSDF_PRINCIPLED"), None)
+    group = colour = None
+    if all(f"b{i}" in textures for i in range(3)):
+        group = new("ShaderNodeGroup", 550, 0)
+        group.node_tree = lightmap_group()
+        for i in range(3):
+            links.new(textures[f"b{i}"].outputs["Color"], group.inputs[f"b{i}"])
+        colour = _normal_colour(bsdf)
+        if colour is not None:
+            links.new(colour, group.inputs["Normal Color"])
+    # Without a normal map `flat` is exact for the interpolated normal, where the HL2
+    # combination is not (0.789 of it under a uniform sky: the b_i are clipped at the
+    # surface); the group stays wired to the b_i maps, ready for a normal map.
+    light = group.outputs["Lightmap"] if colour is not None else textures["flat"].outputs["Color"]
+    times = new("ShaderNodeMix", 800, 0)
+    times.data_type, times.blend_type = "RGBA", "MULTIPLY"
+    times.inputs["Factor"].default_value = 1.0
+    a, b = (next(s for s in times.inputs if s.identifier == f"{k}_Color") for k in "AB")  # the colour sockets
+    links.new(light, a)
+    base = bsdf.inputs["Base Color"] if bsdf is not None else None
+    if base is not None and base.is_linked:
+        links.new(_feeding(base), b)
+    else:
+        b.default_value = tuple(base.default_value) if base is not None else (0.8, 0.8, 0.8, 1.0)
+    emission = new("ShaderNodeEmission", 1050, 0)
+    result = next(s for s in times.outputs if s.identifier == "Result_Color")
+    links.new(result, emission.inputs["Color"])
+    output = new("ShaderNodeOutputMaterial", 1300, 0)
+    output.name = output.label = "Hemishadow Lightmap Output"
+    links.new(emission.outputs["Emission"], output.inputs["Surface"])
+    for node in made:
+        node.parent = frame
+    output.is_active_output = True
+    return True
+
+
+def add_to_objects(scene, objects, uv_name):
+    """add_to_material for every material of the objects; returns (materials changed,
+    warnings). A material used by an object not baked with them (or by two baked objects,
+    which need different images) is skipped with a warning; an object without a material
+    gets a new one. Raises ValueError naming an object that was not baked (before any change)."""
+    for obj in objects:
+        if not baked_images(obj):
+            raise ValueError(f"{obj.name}: no baked lightmap images (hemishadow_{obj.name}_*): bake it first")
+    users = {}
+    for other in scene.objects:
+        for slot in getattr(other, "material_slots", ()):
+            if slot.material is not None:
+                users.setdefault(slot.material.name, set()).add(other.name)
+    added, warnings = [], []
+    for obj in objects:
+        if not any(slot.material for slot in obj.material_slots):
+            mat = bpy.data.materials.new(f"hemishadow_lightmap_{obj.name}")
+            obj.data.materials.append(mat)
+            users[mat.name] = {obj.name}
+        for mat in {slot.material for slot in obj.material_slots if slot.material is not None}:
+            others = sorted(users.get(mat.name, set()) - {obj.name})
+            if others:
+                warnings.append(f"{obj.name}: material '{mat.name}' is shared with {', '.join(others)}: left as it "
+                                "is (give the object its own copy of the material)")
+            elif add_to_material(mat, obj, uv_name):
+                added.append(mat.name)
+    return added, warnings

@@ -14,11 +14,12 @@ import dataclasses
 import os
 import re
 import types
+import warnings
 
 import bpy
 import numpy as np
 
-from . import lamps, world
+from . import lamps, lightmap_albedo, world
 
 DEFAULT_UV = "lightmap"
 IMAGE_PREFIX = "hemishadow_"
@@ -32,6 +33,7 @@ class MeshData:
     corner_normals: np.ndarray
     uv: np.ndarray | None
     tangents: np.ndarray | None
+    albedo: np.ndarray | None = None
 
 
 def make_lightmap_uv(obj, name=DEFAULT_UV, method="LIGHTMAP", margin=0.05):
@@ -98,13 +100,13 @@ def _loop_vectors(collection, size, count, attr="vector"):
     return out.reshape(count, size)
 
 
-def read_mesh(obj, depsgraph, uv_name=None):
+def read_mesh(obj, depsgraph, uv_name=None, albedo=False):
     """The evaluated mesh of `obj` (local space) with its lightmap UVs and tangents per corner.
 
     Tangents are Blender's MikkTSpace tangents of the active render UV map (the one normal
     maps use); None when the mesh cannot have them (no UV map, n-gons), and the engine falls
     back to per-triangle tangents. Raises ValueError naming the object when `uv_name` is
-    asked for and missing."""
+    asked for and missing. `albedo`: also the Base Color per vertex (lightmap_albedo)."""
     obj_eval = obj.evaluated_get(depsgraph)
     mesh = obj_eval.to_mesh()
     try:
@@ -127,7 +129,8 @@ def read_mesh(obj, depsgraph, uv_name=None):
                                  "add one (UV > Lightmap Pack into a new UV map) or choose another")
             uv = _loop_vectors(layer.uv, 2, len(mesh.loops))[loops]
         tangents = _tangents(mesh, loops)
-        return MeshData(vertices, triangles.reshape(m, 3), normals, uv, tangents)
+        colour = lightmap_albedo.base_color(obj, mesh) if albedo else None
+        return MeshData(vertices, triangles.reshape(m, 3), normals, uv, tangents, colour)
     finally:
         obj_eval.to_mesh_clear()
 
@@ -147,30 +150,29 @@ def _tangents(mesh, loops):
     return np.concatenate([t, sign[:, None]], axis=1)[loops]
 
 
-def _principled(obj):
+def principled(obj):
     """The first Principled BSDF of the object's first material, or None."""
     for slot in obj.material_slots:
         mat = slot.material
-        if mat is not None and mat.use_nodes and mat.node_tree is not None:
+        if mat is not None and mat.node_tree is not None:
             for node in mat.node_tree.nodes:
                 if node.type == "BSDF_PRINCIPLED":
                     return node
     return None
 
 
-def albedo_and_emission(obj):
-    """Diffuse albedo (3,) and emitted radiance (3,) from the Principled BSDF's input values
-    (0.8 grey and no emission without one). Textures feeding them are not sampled yet."""
-    node = _principled(obj)
+def emission_of(obj):
+    """Emitted radiance (3,) from the Principled BSDF's Emission input values (none without
+    one; emission textures are not sampled)."""
+    node = principled(obj)
     if node is None:
-        return np.full(3, 0.8), np.zeros(3)
-    albedo = np.array(node.inputs["Base Color"].default_value[:3], np.float64)
+        return np.zeros(3)
     emission = np.zeros(3)
     color = node.inputs.get("Emission Color") or node.inputs.get("Emission")
     strength = node.inputs.get("Emission Strength")
     if color is not None:
         emission = np.array(color.default_value[:3], np.float64) * (strength.default_value if strength else 1.0)
-    return albedo, emission
+    return emission
 
 
 def lighting_of(scene, bands=5):
@@ -238,10 +240,13 @@ def store_image(name, rgb):
     h, w = data.shape[:2]
     image = bpy.data.images.get(name)
     if image is None or tuple(image.size) != (w, h) or not image.is_float:
-        if image is not None:
+        made = bpy.data.images.new(name, w, h, alpha=False, float_buffer=True)
+        made.colorspace_settings.name = "Non-Color"  # before the pixels: it reloads a generated image
+        if image is not None:  # a new size: materials showing the old image show the new one
+            image.user_remap(made)
             bpy.data.images.remove(image)
-        image = bpy.data.images.new(name, w, h, alpha=False, float_buffer=True)
-        image.colorspace_settings.name = "Non-Color"  # before the pixels: it reloads a generated image
+            made.name = name
+        image = made
     rgba = np.ones((h, w, 4), np.float32)
     rgba[..., :3] = data[::-1]  # Blender's pixel rows start at the bottom
     image.pixels.foreach_set(rgba.ravel())
@@ -249,55 +254,178 @@ def store_image(name, rgb):
     return image
 
 
-def bake_lightmaps(scene, objects, *, uv_name=DEFAULT_UV, resolution=256, basis="hl2", bounces=2, samples=4,
-                   margin=2, out_dir=None, depsgraph=None, progress=None, images=True):
-    """Bakes the objects' lightmaps; returns {object name: EXR path or None}.
+MIN_RESOLUTION, MAX_RESOLUTION = 4, 4096
 
-    Writes `DIR/<object>.exr` (layers as docs/lightmaps.md) when a folder is known
-    (`output_folder`) and Blender images `hemishadow_<object>_<map>` when `images`. Raises
-    ValueError naming the object for unusable input; `hemishadow.Cancelled` when `progress`
-    returns False (nothing is written: files are written only once every map is baked)."""
-    import hemishadow
-    import hemishadow.lightmap as lm
 
-    objects = list(objects)
+def density_resolution(area, uv_area, texel_density):
+    """Texels per side giving `texel_density` texels per metre (world units) along the
+    surface: R = density x sqrt(area / uv_area), with `area` the object's surface area in world
+    units and `uv_area` the part of the unit UV square its lightmap islands cover (so that
+    margins and unused space are paid for), rounded to the nearest multiple of 4 and clamped to
+    [4, 4096]."""
+    if not texel_density > 0:
+        raise ValueError(f"texel density must be > 0 texels per metre, got {texel_density!r}")
+    r = texel_density * np.sqrt(area / uv_area) if uv_area > 0 else MIN_RESOLUTION
+    return int(np.clip(4 * round(r / 4), MIN_RESOLUTION, MAX_RESOLUTION))
+
+
+def surface_areas(data, matrix):
+    """World surface area and lightmap UV area (absolute, summed) of a read mesh."""
+    world = data.vertices @ np.asarray(matrix)[:3, :3].T
+    p = world[data.triangles]
+    area = 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1).sum()
+    uv = data.uv
+    e1, e2 = uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0]
+    return float(area), float(0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]).sum())
+
+
+def shared_meshes(scene, objects):
+    """{baked object name: [other objects of the scene using its mesh]} for the objects whose
+    mesh has other users: they cannot have lightmap UVs (or materials) of their own."""
+    out = {}
+    for obj in objects:
+        others = [o for o in scene.objects if o.data == obj.data and o != obj]
+        if obj.type == "MESH" and others:
+            out[obj.name] = others
+    return out
+
+
+def make_single_user(scene, objects):
+    """Gives each of `objects` whose mesh other objects use a copy of that mesh (the last
+    user of a mesh keeps it); returns the objects that got one. Only ever asked for."""
+    changed = []
+    for obj in objects:
+        if obj.type == "MESH" and any(o.data == obj.data and o != obj for o in scene.objects):
+            obj.data = obj.data.copy()
+            changed.append(obj)
+    return changed
+
+
+@dataclasses.dataclass
+class Prepared:
+    """Everything the engine needs, read from Blender; `compute` uses no bpy (a worker
+    thread can run it)."""
+    engine_scene: object
+    targets: list
+    surfaces: list
+    lighting: np.ndarray
+    suns: list
+    resolutions: list
+    options: dict
+
+
+def _check_objects(objects):
     if not objects:
         raise ValueError("no objects to bake: select mesh objects or name them")
     for obj in objects:
         if obj.type != "MESH":
             raise ValueError(f"{obj.name}: only mesh objects can have lightmaps")
+
+
+def prepare(scene, objects, *, uv_name=DEFAULT_UV, resolution=256, texel_density=None, basis="hl2", bounces=2,
+            samples=4, margin=2, depsgraph=None):
+    """Reads the objects, blockers, materials, World and suns (warnings for shared meshes,
+    missing textures); raises ValueError naming the object for unusable input. Changes nothing."""
+    import hemishadow
+    import hemishadow.lightmap as lm
+
+    objects = list(objects)
+    _check_objects(objects)
+    if texel_density is None and not (isinstance(resolution, int) and resolution >= 1):
+        raise ValueError(f"resolution must be at least 1 texel, got {resolution!r}")
+    for name, others in shared_meshes(scene, objects).items():
+        warnings.warn(f"{name}: its mesh '{scene.objects[name].data.name}' is shared with "
+                      f"{', '.join(repr(o.name) for o in others)}: they have one lightmap UV layout; "
+                      "Make Single User (Lightmaps) gives it a mesh of its own", RuntimeWarning, stacklevel=2)
     depsgraph = depsgraph or bpy.context.evaluated_depsgraph_get()
-    scene_ = hemishadow.Scene()
-    surfaces, targets = {}, []
-    for obj in set(blockers(scene)) | set(objects):
-        data = read_mesh(obj, depsgraph, uv_name if obj in objects else None)
+    engine_scene = hemishadow.Scene()
+    surfaces, pairs = {}, []
+    baked = {o.name for o in objects}
+    for obj in sorted(set(blockers(scene)) | set(objects), key=lambda o: (o.name not in baked, o.name)):
+        data = read_mesh(obj, depsgraph, uv_name if obj.name in baked else None, albedo=True)
         if not len(data.triangles):
-            if obj in objects:
+            if obj.name in baked:
                 raise ValueError(f"{obj.name}: the mesh has no faces")
             continue
-        mesh_id = scene_.add_mesh(data.vertices, data.triangles.astype(np.uint32))
+        mesh_id = engine_scene.add_mesh(data.vertices, data.triangles.astype(np.uint32))
         matrix = np.array(obj.evaluated_get(depsgraph).matrix_world, np.float64)
-        scene_.add_instance(mesh_id, matrix)
-        albedo, emission = albedo_and_emission(obj)
-        surfaces[obj.name] = lm.Surface(mesh_id, data.vertices, data.triangles, matrix, albedo, emission, obj.name)
-        if obj in objects:
-            targets.append(lm.Target(surfaces[obj.name], data.uv, data.corner_normals, data.tangents, name=obj.name))
-    others = [s for name, s in surfaces.items() if name not in {t.name for t in targets}]
-    maps = lm.bake(scene_, targets, resolution=resolution, lighting=lighting_of(scene), suns=suns_of(scene), lamps=lamps_of(scene),
-                   surfaces=others, bounces=bounces, samples=samples, margin=margin, basis=basis, progress=progress)
+        engine_scene.add_instance(mesh_id, matrix)
+        surface = lm.Surface(mesh_id, data.vertices, data.triangles, matrix, data.albedo, emission_of(obj), obj.name)
+        surfaces[obj.name] = surface
+        if obj.name in baked:
+            size = resolution if texel_density is None else density_resolution(*surface_areas(data, matrix),
+                                                                                  texel_density)
+            pairs.append((lm.Target(surface, data.uv, data.corner_normals, data.tangents, name=obj.name), size))
+    order = [o.name for o in objects]
+    pairs.sort(key=lambda pair: order.index(pair[0].name))  # results in the caller's order
+    targets, resolutions = [p[0] for p in pairs], [p[1] for p in pairs]
+    others = [s for name, s in surfaces.items() if name not in baked]
+    return Prepared(engine_scene, targets, others, lighting_of(scene), suns_of(scene), resolutions,
+                    dict(bounces=bounces, samples=samples, margin=margin, basis=basis, lamps=lamps_of(scene)))
+
+
+def baked_names(targets):
+    return [t.name for t in targets]
+
+
+def compute(prepared, progress=None):
+    """The engine's bake (no bpy): one dict of maps per target. `progress(fraction)`
+    returning False raises hemishadow.Cancelled."""
+    import hemishadow.lightmap as lm
+
+    return lm.bake(prepared.engine_scene, prepared.targets, resolution=prepared.resolutions,
+                   lighting=prepared.lighting, suns=prepared.suns, surfaces=prepared.surfaces, progress=progress,
+                   **prepared.options)
+
+
+def write_files(folder, named_maps):
+    """Writes every `<name>.exr` or none: each to a temporary file first, renamed into place
+    only once all are written (a failure removes the temporary files)."""
+    import hemishadow.lightmap as lm
+
+    os.makedirs(folder, exist_ok=True)
+    pending = []
+    try:
+        for name, maps in named_maps:
+            final = os.path.join(folder, f"{_safe(name)}.exr")
+            temporary = os.path.join(folder, f".{_safe(name)}.hemishadow-partial.exr")
+            lm.write_exr(temporary, maps)
+            pending.append((temporary, final))
+    except BaseException:
+        for temporary, _ in pending:
+            os.remove(temporary)
+        raise
+    for temporary, final in pending:
+        os.replace(temporary, final)
+    return {name: final for (name, _), (_, final) in zip(named_maps, pending)}
+
+
+def finish(prepared, results, out_dir=None, images=True):
+    """Writes the files (all or none) and then the Blender images; returns {object: path}."""
+    named = list(zip(baked_names(prepared.targets), results))
     folder = output_folder(out_dir)
-    written = {}
-    for target, result in zip(targets, maps):
-        path = None
-        if folder is not None:
-            path = os.path.join(folder, f"{_safe(target.name)}.exr")
-            lm.write_exr(path, result)
-        written[target.name] = path
-        if images:
-            for name, data in result.items():
-                if name != "valid":
-                    image = store_image(f"{IMAGE_PREFIX}{target.name}_{name}", data)
+    written = write_files(folder, named) if folder is not None else {name: None for name, _ in named}
+    if images:
+        for name, result in named:
+            for map_name, data in result.items():
+                if map_name != "valid":
+                    image = store_image(f"{IMAGE_PREFIX}{name}_{map_name}", data)
                     if folder is None:
                         image.file_format = "OPEN_EXR"  # float pixels packed as float
                         image.pack()
     return written
+
+
+def bake_lightmaps(scene, objects, *, uv_name=DEFAULT_UV, resolution=256, texel_density=None, basis="hl2", bounces=2,
+                   samples=4, margin=2, out_dir=None, depsgraph=None, progress=None, images=True):
+    """Bakes the objects' lightmaps; returns {object name: EXR path or None}.
+
+    Writes `DIR/<object>.exr` (layers as docs/lightmaps.md) when a folder is known
+    (`output_folder`) and Blender images `hemishadow_<object>_<map>` when `images`.
+    `texel_density` (texels per metre) replaces `resolution` (`density_resolution`, per
+    object). Raises ValueError naming the object for unusable input; `hemishadow.Cancelled`
+    when `progress` returns False (nothing is written: files and images are written only once
+    every map is baked). The plain path of the modal operator (lightmap_job.py)."""
+    prepared = prepare(scene, objects, uv_name=uv_name, resolution=resolution, texel_density=texel_density,
+                       basis=basis, bounces=bounces, samples=samples, margin=margin, depsgraph=depsgraph)
+    return finish(prepared, compute(prepared, progress), out_dir, images)

@@ -1,7 +1,9 @@
 """`blender -b FILE --command hemishadow lightmaps ...`: the lightmap bake from the command
 line (issue 11). cli.py registers the subcommand; the work is lightmaps.bake_lightmaps."""
 
+import sys
 import time
+import warnings
 
 from . import lightmaps
 
@@ -15,7 +17,12 @@ def add_parser(commands):
     p.add_argument("--collection", metavar="NAME", help="bake the mesh objects of this collection")
     p.add_argument("--uv", default=lightmaps.DEFAULT_UV, metavar="NAME",
                    help=f"UV map placing the texels (default: {lightmaps.DEFAULT_UV})")
-    p.add_argument("--resolution", type=int, default=256, metavar="PX", help="texels per side (default: 256)")
+    size = p.add_mutually_exclusive_group()
+    size.add_argument("--resolution", type=int, default=256, metavar="PX", help="texels per side (default: 256)")
+    size.add_argument("--texel-density", type=float, metavar="PER_M",
+                      help="texels per metre of surface instead of --resolution: per object, "
+                           "density x sqrt(world area / lightmap UV area), a multiple of 4 in "
+                           f"[{lightmaps.MIN_RESOLUTION}, {lightmaps.MAX_RESOLUTION}]")
     p.add_argument("--basis", choices=("hl2", "sh", "flat"), default="hl2",
                    help="hl2: flat, b0-b2, ao; sh: flat, sh0-sh3, ao; flat: flat, ao (default: hl2)")
     p.add_argument("--bounces", type=int, default=2, metavar="N", help="diffuse bounces, 0 = direct only (default: 2)")
@@ -54,9 +61,14 @@ def run(scene, found, args, progress):
     if args.out is None and not __import__("bpy").data.filepath:
         raise ValueError("the .blend file has never been saved: give --out DIR")
     t0 = time.perf_counter()
-    written = lightmaps.bake_lightmaps(scene, found, uv_name=args.uv, resolution=args.resolution, basis=args.basis,
-                                       bounces=args.bounces, samples=args.samples, margin=args.margin,
-                                       out_dir=args.out, progress=progress, images=False)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        written = lightmaps.bake_lightmaps(scene, found, uv_name=args.uv, resolution=args.resolution,
+                                           texel_density=args.texel_density, basis=args.basis, bounces=args.bounces,
+                                           samples=args.samples, margin=args.margin, out_dir=args.out,
+                                           progress=progress, images=False)
+    for warning in caught:
+        print(f"hemishadow: warning: {warning.message}", file=sys.stderr)
     for name, path in written.items():
         print(f"hemishadow: {name} -> {path}")
     skipped = lightmaps.unsupported_lamps(scene)

@@ -29,6 +29,9 @@ def draw_object_settings(layout, obj, scene):
     column.prop(settings, "bands")
     column.prop(settings, "albedo")
     column.prop(settings, "casters")
+    column.prop(settings, "probe_volume")
+    if settings.probe_volume is not None:
+        column.prop(settings, "probe_point")
     outputs = column.column(heading="Outputs", align=True)
     outputs.label(text="Radiance: hemishadow_radiance", icon="COLOR")
     ao = outputs.row()

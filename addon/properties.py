@@ -43,6 +43,14 @@ def _casters_changed(self, context):
         engine_bridge.update_scene(context.scene, context.evaluated_depsgraph_get())
 
 
+def _probe_changed(self, context):
+    """The object's lighting source changed: shade it again (its transfer stays)."""
+    if context.scene.hemishadow.live and self.id_data.hemishadow.enabled:
+        from . import engine_bridge
+
+        engine_bridge.update_scene(context.scene, context.evaluated_depsgraph_get(), [self.id_data], force=True)
+
+
 def _live_changed(self, context):
     if self.live:
         from . import engine_bridge
@@ -118,6 +126,14 @@ class HemishadowObjectSettings(bpy.types.PropertyGroup):
     casters: PointerProperty(name="Shadow Casters", type=bpy.types.Collection, update=_casters_changed,
                              description="Objects that shadow this one, besides itself (empty: the scene's "
                                          "Shadow Casters)")
+    probe_volume: PointerProperty(name="Probe Lighting", type=bpy.types.Object, update=_probe_changed,
+                                  poll=lambda self, obj: obj.type in {"LIGHT_PROBE", "EMPTY"},
+                                  description="A volume with baked probes whose light, at this object's place, "
+                                              "replaces the World and lamps for it (empty: the World)")
+    probe_point: EnumProperty(name="Probe Point", default="CENTER", update=_probe_changed,
+                              items=[("CENTER", "Bounds Centre", "The centre of the object's bounds"),
+                                     ("ORIGIN", "Origin", "The object's origin")],
+                              description="Where the object takes its light from the probe grid")
     status: StringProperty(name="Status", default="", description="Outcome of the last computation")
 
     @property

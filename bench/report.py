@@ -402,10 +402,17 @@ def build_markdown(results):
     out += speedup_table(results) + pvs_section(results) + vertex_section(results) + ["## Per mesh\n"]
     for name, m in results["meshes"].items():
         out += mesh_section(name, m)
-    out += ["## Scenes\n",
-            "Many objects and instances seen from arbitrary receivers (`hemishadow.Scene`, issue 10) are measured "
-            "by `bench/scene.py`: [benchmarks_scene.md](benchmarks_scene.md).\n"]
-    return "\n".join(out)
+    return "\n".join(out + scenes_section())
+
+
+def scenes_section():
+    """The scene benchmark's page (`bench/scene.py`, a run of its own), under a heading here."""
+    page = ROOT / "docs" / "benchmarks_scene.md"
+    lines = page.read_text().splitlines()[1:] if page.is_file() else []
+    return ["## Scenes\n",
+            "Many objects and instances seen from arbitrary receivers (`hemishadow.Scene`, issue 10), measured by "
+            "`bench/scene.py` in a run of its own (also on [benchmarks_scene.md](benchmarks_scene.md)):\n",
+            "\n".join(lines)]
 
 
 def main(path=None, write_docs=None):

@@ -1,11 +1,11 @@
 """Operators, one module per job: live.py (compute, live toggle, clear, material),
 bake.py (bake a frame range to a cache), world.py (precompute World lighting), jobs.py
-(heavy meshes in the background) and lightmaps.py (bake lightmaps)."""
+(heavy meshes in the background) lightmaps.py (bake lightmaps) and probes.py (bake probes, preview)."""
 
 import bpy
 
-from . import bake, jobs, lightmaps, live, world
+from . import bake, jobs, lightmaps, live, probes, world
 
-classes = live.classes + bake.classes + world.classes + jobs.classes + lightmaps.classes
+classes = live.classes + bake.classes + world.classes + jobs.classes + lightmaps.classes + probes.classes
 
 register, unregister = bpy.utils.register_classes_factory(classes)

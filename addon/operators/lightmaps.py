@@ -1,17 +1,44 @@
-"""Bake Lightmaps: the selected mesh objects' directional lightmaps (issue 11).
+"""Lightmap operators (issue 11): Bake Lightmaps (modal, with progress and Esc), Make
+Lightmap UVs, Add to Materials, Make Single User (Lightmaps).
 
-Thin: `addon.lightmaps.bake_lightmaps` does the work. Blocking for now, with Blender's
-progress bar (no Esc: a modal driver with a worker thread is still to come); files are
-written only after every map is baked, so a failure leaves nothing half-written.
+Thin: lightmaps.py, lightmap_job.py and lightmap_nodes.py do the work. The settings are the
+scene's (`Scene.hemishadow_lightmaps`, the Lightmaps panel); an operator property set by a
+caller (a script, a test) overrides its setting.
 """
 
 import bpy
 
-from .. import lightmaps
+from .. import lightmap_job, lightmap_nodes, lightmap_settings, lightmaps
+
+_OVERRIDABLE = ("uv_name", "resolution", "basis", "bounces", "samples", "margin")
+
+
+def _report_warnings(operator, messages):
+    for message in messages:
+        operator.report({"WARNING"}, message)
+
+
+def _arguments(operator, context):
+    settings = context.scene.hemishadow_lightmaps
+    kwargs = lightmap_settings.bake_arguments(settings)
+    for name in _OVERRIDABLE:
+        if operator.properties.is_property_set(name):
+            kwargs[name] = getattr(operator, name)
+            if name == "resolution":
+                kwargs["texel_density"] = None
+    if operator.properties.is_property_set("texel_density"):
+        kwargs["texel_density"] = operator.texel_density
+    directory = operator.directory if operator.properties.is_property_set("directory") else settings.directory
+    return lightmap_settings.objects(context, settings), kwargs, directory or None
+
+
+def _summary(written):
+    where = sorted({p.rsplit("/", 1)[0] for p in written.values() if p}) or ["packed images"]
+    return f"hemishadow: baked {len(written)} lightmap(s) to {', '.join(where)}"
 
 
 class HEMISHADOW_OT_bake_lightmaps(bpy.types.Operator):
-    """Bake directional lightmaps (flat, HL2 basis or L1 SH, AO) of the selected mesh objects"""
+    """Bake directional lightmaps (flat, HL2 basis or L1 SH, AO) of the chosen mesh objects (Esc cancels, writing nothing)"""
 
     bl_idname = "hemishadow.bake_lightmaps"
     bl_label = "Bake Lightmaps"
@@ -20,6 +47,7 @@ class HEMISHADOW_OT_bake_lightmaps(bpy.types.Operator):
     uv_name: bpy.props.StringProperty(name="UV Map", default=lightmaps.DEFAULT_UV,
                                       description="UV map placing the texels (not changed)")
     resolution: bpy.props.IntProperty(name="Resolution", default=256, min=1, max=8192)
+    texel_density: bpy.props.FloatProperty(name="Texels per Metre", default=32.0, min=0.01)
     basis: bpy.props.EnumProperty(name="Basis", default="hl2", items=[
         ("hl2", "HL2", "flat, b0, b1, b2 (Half-Life 2 basis) and ao"),
         ("sh", "L1 SH", "flat, sh0..sh3 (world-space L1 SH) and ao"),
@@ -30,34 +58,110 @@ class HEMISHADOW_OT_bake_lightmaps(bpy.types.Operator):
     directory: bpy.props.StringProperty(name="Folder", default="", subtype="DIR_PATH",
                                         description="Where <object>.exr goes (default //lightmaps beside the .blend)")
 
+    _job = None
+    _timer = None
+    _area = None
+
     @classmethod
     def poll(cls, context):
-        return any(o.type == "MESH" for o in context.selected_objects)
+        settings = getattr(context.scene, "hemishadow_lightmaps", None)
+        return settings is not None and bool(lightmap_settings.objects(context, settings))
 
     def execute(self, context):
-        objects = [o for o in context.selected_objects if o.type == "MESH"]
+        """The blocking path (background mode, scripts, redo): the plain function."""
+        objects, kwargs, directory = _arguments(self, context)
         wm = context.window_manager
         wm.progress_begin(0, 1000)
         try:
-            written = lightmaps.bake_lightmaps(
-                context.scene, objects, uv_name=self.uv_name, resolution=self.resolution, basis=self.basis,
-                bounces=self.bounces, samples=self.samples, margin=self.margin, out_dir=self.directory or None,
-                progress=lambda f: wm.progress_update(int(1000 * f)))
+            import warnings
+
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always")
+                written = lightmaps.bake_lightmaps(context.scene, objects, out_dir=directory,
+                                                   progress=lambda f: wm.progress_update(int(1000 * f)), **kwargs)
         except (ValueError, OSError) as error:
             self.report({"ERROR"}, str(error))
             return {"CANCELLED"}
         finally:
             wm.progress_end()
+        _report_warnings(self, [str(w.message) for w in caught])
+        self._finished(context, written)
+        return {"FINISHED"}
+
+    def invoke(self, context, event):
+        if bpy.app.background or context.window is None:
+            return self.execute(context)
+        objects, kwargs, directory = _arguments(self, context)
+        try:
+            self._job = lightmap_job.LightmapBake(context.scene, objects, out_dir=directory, **kwargs).start()
+        except (ValueError, OSError) as error:
+            self.report({"ERROR"}, str(error))
+            return {"CANCELLED"}
+        wm = context.window_manager
+        wm.progress_begin(0, 1000)
+        self._timer = wm.event_timer_add(0.1, window=context.window)
+        self._area = context.area
+        wm.modal_handler_add(self)
+        self._status(context, "Baking lightmaps")
+        return {"RUNNING_MODAL"}
+
+    def modal(self, context, event):
+        job = self._job
+        if event.type == "ESC" and event.value == "PRESS":
+            job.cancel()
+            self._status(context, "Cancelling lightmap bake")
+            return {"RUNNING_MODAL"}
+        if event.type != "TIMER":
+            return {"PASS_THROUGH"}  # the UI stays usable while the worker bakes
+        state = job.step()
+        if state == lightmap_job.RUNNING:
+            context.window_manager.progress_update(int(1000 * job.fraction))
+            self._status(context, f"Baking lightmaps of {len(job.names)} object(s): {100 * job.fraction:.0f} % "
+                                  "(Esc cancels)")
+            return {"RUNNING_MODAL"}
+        self._end(context)
+        _report_warnings(self, job.warnings)
+        if state == lightmap_job.CANCELLED:
+            self.report({"WARNING"}, "hemishadow: lightmap bake cancelled; nothing was written")
+            return {"CANCELLED"}
+        if state == lightmap_job.FAILED:
+            self.report({"ERROR"}, f"hemishadow: lightmap bake failed, nothing written: {job.error}")
+            return {"CANCELLED"}
+        self._finished(context, job.written)
+        return {"FINISHED"}
+
+    def cancel(self, context):  # Blender ends the operator (file closed, window gone)
+        if self._job is not None:
+            self._job.cancel()
+        self._end(context)
+
+    def _status(self, context, text):
+        if context.workspace is not None:
+            context.workspace.status_text_set(text)
+        if self._area is not None:
+            self._area.header_text_set(text)
+
+    def _end(self, context):
+        wm = context.window_manager
+        if self._timer is not None:
+            wm.event_timer_remove(self._timer)
+            self._timer = None
+        wm.progress_end()
+        if context.workspace is not None:
+            context.workspace.status_text_set(None)
+        if self._area is not None:
+            self._area.header_text_set(None)
+            self._area = None
+
+    def _finished(self, context, written):
         skipped = lightmaps.unsupported_lamps(context.scene)
         if skipped:
             self.report({"WARNING"}, f"lamps not baked yet (point, spot, area): {', '.join(skipped)}")
-        where = sorted({p.rsplit('/', 1)[0] for p in written.values() if p}) or ["packed images"]
-        self.report({"INFO"}, f"hemishadow: baked {len(written)} lightmap(s) to {', '.join(where)}")
-        return {"FINISHED"}
+        self.report({"INFO"}, _summary(written))
 
 
 class HEMISHADOW_OT_make_lightmap_uv(bpy.types.Operator):
-    """Add a new UV map for lightmaps to the selected meshes (Lightmap Pack or Smart UV Project); existing UV maps are not touched"""
+    """Add a new UV map for lightmaps to the chosen meshes (Lightmap Pack or Smart UV Project); existing UV maps are not touched"""
 
     bl_idname = "hemishadow.make_lightmap_uv"
     bl_label = "Make Lightmap UVs"
@@ -70,11 +174,16 @@ class HEMISHADOW_OT_make_lightmap_uv(bpy.types.Operator):
 
     @classmethod
     def poll(cls, context):
-        return context.mode == "OBJECT" and any(o.type == "MESH" for o in context.selected_objects)
+        return context.mode == "OBJECT" and bool(_chosen(context))
+
+    def invoke(self, context, event):
+        if not self.properties.is_property_set("uv_name"):
+            self.uv_name = context.scene.hemishadow_lightmaps.uv_name
+        return self.execute(context)
 
     def execute(self, context):
         made, kept = [], []
-        for obj in [o for o in context.selected_objects if o.type == "MESH"]:
+        for obj in _chosen(context):
             if self.uv_name in obj.data.uv_layers:
                 kept.append(obj.name)
                 continue
@@ -84,10 +193,64 @@ class HEMISHADOW_OT_make_lightmap_uv(bpy.types.Operator):
                 self.report({"ERROR"}, str(error))
                 return {"CANCELLED"}
             made.append(obj.name)
+        shared = lightmaps.shared_meshes(context.scene, _chosen(context))
+        for name, others in shared.items():
+            self.report({"WARNING"}, f"{name}: its mesh is shared with {', '.join(o.name for o in others)}, "
+                                     "which got the same UV map")
         if kept:
             self.report({"INFO"}, f"already have {self.uv_name!r} (left as is): {', '.join(kept)}")
         self.report({"INFO"}, f"hemishadow: made {self.uv_name!r} for {len(made)} object(s)")
         return {"FINISHED"}
 
 
-classes = (HEMISHADOW_OT_bake_lightmaps, HEMISHADOW_OT_make_lightmap_uv)
+def _chosen(context):
+    settings = getattr(context.scene, "hemishadow_lightmaps", None)
+    if settings is None:
+        return [o for o in context.selected_objects if o.type == "MESH"]
+    return lightmap_settings.objects(context, settings)
+
+
+class HEMISHADOW_OT_add_lightmap_nodes(bpy.types.Operator):
+    """Add the baked lightmaps ("Hemishadow Lightmap" node group, times Base Color, as Emission into a new active Material Output) to the baked objects' materials; nothing is removed"""
+
+    bl_idname = "hemishadow.add_lightmap_nodes"
+    bl_label = "Add to Materials"
+    bl_options = {"REGISTER", "UNDO"}
+
+    @classmethod
+    def poll(cls, context):
+        return bool(_chosen(context))
+
+    def execute(self, context):
+        objects = _chosen(context)
+        uv_name = context.scene.hemishadow_lightmaps.uv_name
+        try:
+            added, warnings = lightmap_nodes.add_to_objects(context.scene, objects, uv_name)
+        except ValueError as error:
+            self.report({"ERROR"}, str(error))
+            return {"CANCELLED"}
+        _report_warnings(self, warnings)
+        self.report({"INFO"}, f"hemishadow: lightmaps added to {len(added)} material(s)")
+        return {"FINISHED"}
+
+
+class HEMISHADOW_OT_lightmap_single_user(bpy.types.Operator):
+    """Give each object to bake whose mesh other objects share a copy of the mesh, so that it can have lightmap UVs of its own"""
+
+    bl_idname = "hemishadow.lightmap_single_user"
+    bl_label = "Make Single User (Lightmaps)"
+    bl_options = {"REGISTER", "UNDO"}
+
+    @classmethod
+    def poll(cls, context):
+        return bool(lightmaps.shared_meshes(context.scene, _chosen(context)))
+
+    def execute(self, context):
+        changed = lightmaps.make_single_user(context.scene, _chosen(context))
+        self.report({"INFO"}, f"hemishadow: gave {', '.join(o.name for o in changed) or 'no object'} "
+                              "a mesh of its own")
+        return {"FINISHED"}
+
+
+classes = (HEMISHADOW_OT_bake_lightmaps, HEMISHADOW_OT_make_lightmap_uv, HEMISHADOW_OT_add_lightmap_nodes,
+           HEMISHADOW_OT_lightmap_single_user)

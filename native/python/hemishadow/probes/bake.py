@@ -1,0 +1,143 @@
+"""The probe baker's engine part: points in, ambient cubes and SH9 out (issue 12).
+
+`bake(scene, points, lighting=..., suns=..., surfaces=..., bounces=N)` returns a dict:
+`positions` (P, 3) (after moving invalid probes), `cube` (P, 6, 3) (irradiance / pi per
+side, +X, -X, +Y, -Y, +Z, -Z), `sh9` (P, 9, 3) (SH projection of the incident radiance, the
+convention of `hemishadow.project_environment`, not divided by pi), `valid` (P,), `moved`
+(P,); `bake_grid` adds `grid_matrix` (4, 4) and `grid_resolution` (3,). See docs/probes.md.
+"""
+
+import numpy as np
+
+from .. import Cancelled
+from ..lightmap.bake import _bounce_receivers, _direct, _emits, _lighting, _positive_int, _suns
+from ..lightmap import bounce, cells, texels
+from . import capture, grid, validity
+from .cube import sh_to_cube
+
+_CHUNK = 4096
+GATHER_BANDS = 5  # bounce light as SH25: the cube's lobes from bands 0-4 (A_3 = 0, A_4 = -pi/24)
+
+
+def _points(points):
+    array = np.asarray(points, dtype=np.float64)
+    if array.ndim != 2 or array.shape[1] != 3:
+        raise ValueError(f"probe points must have shape (P, 3), got {array.shape}")
+    if not len(array):
+        raise ValueError("no probe points to bake")
+    if not np.isfinite(array).all():
+        raise ValueError(f"probe point {int(np.argwhere(~np.isfinite(array))[0, 0])} has a NaN or infinite coordinate")
+    return array
+
+
+def _cell(cell):
+    if cell is None:
+        return None
+    c = np.asarray(cell, dtype=np.float64)
+    c = np.diag(np.broadcast_to(c, (3,))) if c.ndim <= 1 else c
+    if c.shape != (3, 3) or not np.isfinite(c).all():
+        raise ValueError(f"cell must be a number, 3 numbers or a (3, 3) matrix of cell axes, got shape {c.shape}")
+    return c
+
+
+class _Progress:
+    def __init__(self, callback, total):
+        self.callback, self.total, self.done = callback, max(total, 1), 0
+
+    def step(self, amount=1):
+        self.done += amount
+        if self.callback is not None and self.callback(min(self.done / self.total, 1.0)) is False:
+            raise Cancelled("probe bake cancelled")
+
+
+def bake(scene, points, *, lighting=None, suns=(), surfaces=(), bounces=2, cell=None, offset=None, progress=None):
+    """Bakes probes at `points` (P, 3) in `scene` (a `hemishadow.Scene` of every blocker).
+
+    lighting: environment radiance SH (K, 3), K = 1, 4, 9, 16, 25 (None: none).
+    suns: `hemishadow.lightmap.Sun`s (strength = irradiance in W/m^2 facing the sun).
+    surfaces: `hemishadow.lightmap.Surface`s that reflect (albedo) or emit light; bounce
+        receivers at their vertices, as in the lightmap baker. bounces: 0 = direct light only.
+    cell: the grid's cell axes ((3, 3) columns, a number or 3 numbers), so that invalid probes
+        may move up to half a cell; None: invalid probes stay, marked invalid.
+    progress: callable(fraction); returning False raises `hemishadow.Cancelled`.
+    """
+    pts = _points(points)
+    if scene.triangle_count == 0:
+        raise ValueError("the scene has no geometry: add the meshes that block light before baking probes")
+    bounces = _positive_int(bounces, "bounces", 0)
+    lighting, suns, cell = _lighting(lighting), _suns(suns), _cell(cell)
+    surfaces = list(surfaces)
+    emits = _emits([], surfaces)
+    receivers = _bounce_receivers([], surfaces) if surfaces and (bounces or emits) else []
+    steps = _Progress(progress, 3 * len(pts) + sum(len(r[1]) for r in receivers) * (1 + bounces))
+
+    masks = capture.masks(scene, pts, offset)
+    valid = validity.check(scene, pts, masks, offset)
+    moved = np.zeros(len(pts), bool)
+    if cell is not None and not valid.all():
+        pts, moved = validity.relocate(scene, pts, valid, cell, offset)
+        if moved.any():
+            masks[:, moved] = capture.masks(scene, pts[moved], offset)
+            valid[moved] = True
+    steps.step(len(pts))
+
+    cube, sh9 = np.zeros((len(pts), 6, 3)), np.zeros((len(pts), 9, 3))
+    for s in range(0, len(pts), _CHUNK):  # unpacked masks: 6 KiB a probe
+        open_cells = np.stack([~cells.unpack(m[s:s + _CHUNK]) for m in masks])
+        cube[s:s + _CHUNK], sh9[s:s + _CHUNK] = capture.environment(
+            open_cells, None if lighting is None else lighting.astype(np.float64))
+    for lamp in suns:
+        c, s = capture.sun(scene, pts, lamp, offset)
+        cube += c
+        sh9 += s
+    steps.step(len(pts))
+    if receivers:
+        gathered = _bounce(scene, receivers, pts, lighting, suns, bounces, offset, steps)
+        if gathered is not None:
+            cube += np.maximum(sh_to_cube(gathered), 0.0)
+            sh9 += gathered[:, :9]
+    steps.step(len(pts))
+    cube, sh9 = _fill_invalid(pts, cube, sh9, valid)
+    return {"positions": pts.astype(np.float32), "cube": cube.astype(np.float32), "sh9": sh9.astype(np.float32),
+            "valid": valid, "moved": moved}
+
+
+def bake_grid(scene, matrix, resolution, **kwargs):
+    """`bake` on the probes of a grid (`grid.grid_points`), cell = the matrix's axes; the
+    result also holds `grid_matrix` and `grid_resolution`."""
+    m, res = grid.matrix4(matrix), grid.resolution3(resolution)
+    kwargs.setdefault("cell", m[:3, :3])
+    out = bake(scene, grid.grid_points(m, res), **kwargs)
+    out["grid_matrix"], out["grid_resolution"] = m.astype(np.float64), res
+    return out
+
+
+def _bounce(scene, receivers, points, lighting, suns, bounces, offset, steps):
+    """SH25 (P, 25, 3) of the light arriving from the surfaces after `bounces` passes (the
+    lightmap baker's vertex receivers and `bounce.vertex_radiance`), gathered over the whole
+    sphere; None when every surface stays black."""
+    direct = []
+    for mesh_id, pts, nrm, ok, _, _ in receivers:
+        d = np.zeros((len(pts), 3), np.float32)
+        if ok.any() and bounces:  # with no pass, surfaces show their emission only
+            d[ok] = _direct(scene, pts[ok], nrm[ok], nrm[ok][:, None], lighting, suns,
+                                          np.zeros(ok.sum(), np.int64), texels.offsets(1), False, offset, steps,
+                                          exact_suns=False)[0][:, 0]
+        direct.append(d)
+    radiance = bounce.vertex_radiance(scene, receivers, direct, bounces, offset)
+    steps.step(sum(len(r[1]) for r in receivers) * bounces)
+    if not any(r.any() for r in radiance):
+        return None
+    return scene.gather(points, None, bands=GATHER_BANDS, offset=offset).astype(np.float64)
+
+
+def _fill_invalid(points, cube, sh9, valid):
+    """Invalid probes (left out of interpolation) take their nearest valid probe's values,
+    so that a file read without `valid` never shows a black cube; all invalid: unchanged."""
+    bad = np.flatnonzero(~valid)
+    good = np.flatnonzero(valid)
+    if len(bad) and len(good):
+        d = ((points[bad][:, None] - points[good][None]) ** 2).sum(-1)
+        nearest = good[np.argmin(d, axis=1)]
+        cube[bad], sh9[bad] = cube[nearest], sh9[nearest]
+    return cube, sh9
