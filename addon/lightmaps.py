@@ -192,9 +192,31 @@ def suns_of(scene):
     return out
 
 
+def lamps_of(scene):
+    """Point, spot and area lamps as the engine's lamps (size scaled by the object's scale)."""
+    import hemishadow.lightmap as lm
+
+    out = []
+    for obj in lamps.visible_lamps(scene, ("POINT", "SPOT", "AREA")):
+        m, light = obj.matrix_world, obj.data
+        pos, power = np.array(m.translation, np.float64), lamps.lamp_power_color(light)
+        axis = [np.array(m.to_3x3().col[k], np.float64) for k in range(3)]
+        if light.type == "POINT":
+            out.append(lm.Point(pos, power, float(light.shadow_soft_size)))
+        elif light.type == "SPOT":
+            out.append(lm.Spot(pos, -axis[2], power, float(light.shadow_soft_size), float(light.spot_size),
+                               float(light.spot_blend)))
+        else:
+            sx, sy = np.linalg.norm(axis[0]), np.linalg.norm(axis[1])
+            y = light.size_y if light.shape in ("RECTANGLE", "ELLIPSE") else light.size
+            shape = "ELLIPSE" if light.shape in ("DISK", "ELLIPSE") else "RECTANGLE"  # scale may stretch it
+            out.append(lm.Area(pos, -axis[2], axis[0], power, shape, float(light.size) * sx, float(y) * sy))
+    return out
+
+
 def unsupported_lamps(scene):
-    """Names of lamps the bake leaves out (point, spot, area: docs/lightmaps.md)."""
-    return [obj.name for obj in lamps.visible_lamps(scene, ("POINT", "SPOT", "AREA"))]
+    """Names of lamps the bake leaves out: none since point, spot and area lamps are baked."""
+    return []
 
 
 def _safe(name):
@@ -339,7 +361,7 @@ def prepare(scene, objects, *, uv_name=DEFAULT_UV, resolution=256, texel_density
     targets, resolutions = [p[0] for p in pairs], [p[1] for p in pairs]
     others = [s for name, s in surfaces.items() if name not in baked]
     return Prepared(engine_scene, targets, others, lighting_of(scene), suns_of(scene), resolutions,
-                    dict(bounces=bounces, samples=samples, margin=margin, basis=basis))
+                    dict(bounces=bounces, samples=samples, margin=margin, basis=basis, lamps=lamps_of(scene)))
 
 
 def baked_names(targets):

@@ -5,6 +5,14 @@ texels brighter than 1 % of the open-sky value, and both times.
 
     PYTHONPATH=native/python .venv/bin/python bench/lightmap_cycles.py [--resolution 32]
         [--samples 1024] [--bounces 0] [--no-sun] [--cuts N] [--map flat|b0|b1|b2]
+        [--scene floor|room|corner] [--lamp none|point|spot|area] [--sweep 16,64,256]
+
+--scene room: a closed 4 x 4 x 2.5 m room with a window in its +X wall, a table and a cabinet
+(sky and sun come in through the window); corner: a ground with two walls meeting at a corner
+and an overhang. The baked object is the floor (ground) in every scene. --lamp adds a point
+(radius 0.1 m), spot (60 degrees, blend 0.3) or area (1 x 0.6 m) lamp under the ceiling
+(over the corner). --sweep bakes with Cycles at those sample counts too and compares each
+with the reference (--samples), to find Cycles' time at our error.
 
 For a `b_i` map, the floor's material gets a Normal Map node (tangent space, the floor's
 render UV map) fed the constant colour (b_i + 1) / 2, with bump-map correction off; only the
@@ -19,6 +27,7 @@ import tempfile
 import time
 
 import bpy
+import mathutils
 import numpy as np
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
@@ -27,30 +36,82 @@ from addon import lightmaps, world  # noqa: E402
 import hemishadow.lightmap as lm  # noqa: E402
 
 
-def build(sun, cuts=0, basis_vector=None):
+def _box(name, lo, hi, material):
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    bpy.ops.mesh.primitive_cube_add(size=1.0, location=tuple((lo + hi) / 2))
+    obj = bpy.context.active_object
+    obj.name = name
+    obj.scale = tuple(hi - lo)
+    bpy.ops.object.transform_apply(location=False, rotation=False, scale=True)
+    obj.data.materials.append(material)
+    return obj
+
+
+def _room(material):
+    """Walls 0.2 m thick around a 4 x 4 m floor, 2.5 m high; a 1.6 x 1 m window in the +X wall."""
+    out = [_box("WallW", (-2.2, -2.2, 0), (-2, 2.2, 2.5), material), _box("WallS", (-2, -2.2, 0), (2, -2, 2.5), material),
+           _box("WallN", (-2, 2, 0), (2, 2.2, 2.5), material), _box("Ceiling", (-2.2, -2.2, 2.5), (2.2, 2.2, 2.7), material),
+           _box("WallE1", (2, -2.2, 0), (2.2, 2.2, 0.8), material), _box("WallE2", (2, -2.2, 1.8), (2.2, 2.2, 2.5), material),
+           _box("WallE3", (2, -2.2, 0.8), (2.2, -0.8, 1.8), material), _box("WallE4", (2, 0.8, 0.8), (2.2, 2.2, 1.8), material),
+           _box("TableTop", (-0.8, -0.5, 0.7), (0.4, 0.5, 0.75), material),
+           _box("Cabinet", (-1.9, 0.8, 0), (-1.4, 1.9, 1.6), material)]
+    for i, (x, y) in enumerate([(-0.75, -0.45), (0.35, -0.45), (-0.75, 0.45), (0.35, 0.45)]):
+        out.append(_box(f"Leg{i}", (x - 0.03, y - 0.03, 0), (x + 0.03, y + 0.03, 0.7), material))
+    return out
+
+
+def _corner(material):
+    """Two walls meeting at a corner and an overhang over the ground in front of one of them."""
+    return [_box("WallA", (-2, 1, 0), (2, 1.2, 2), material), _box("WallB", (-2, -2, 0), (-1.8, 1, 2), material),
+            _box("Overhang", (-2, -0.2, 2), (1, 1.2, 2.1), material)]
+
+
+LAMPS = {  # (type, location, rotation in degrees, settings); rotation (0, 0, 0) points down
+    "point": ("POINT", (0.3, -0.6, 2.2), (0, 0, 0), {"energy": 200.0, "shadow_soft_size": 0.1}),
+    "spot": ("SPOT", (-0.3, 0.2, 2.3), (20, 0, 0), {"energy": 300.0, "shadow_soft_size": 0.05,
+                                                   "spot_size": math.radians(60), "spot_blend": 0.3}),
+    "area": ("AREA", (0.0, -0.5, 2.4), (0, 0, 30), {"energy": 150.0, "shape": "RECTANGLE", "size": 1.0, "size_y": 0.6}),
+}
+
+
+def _lamp(kind, corner):
+    kind_, location, rotation, settings = LAMPS[kind]
+    if corner:
+        location = (location[0] - 0.5, location[1] + 0.3, 1.8)
+    bpy.ops.object.light_add(type=kind_, location=location, rotation=tuple(math.radians(a) for a in rotation))
+    for key, value in settings.items():
+        setattr(bpy.context.active_object.data, key, value)
+
+
+def build(sun, cuts=0, basis_vector=None, scene_name="floor", lamp="none", sky=1.0):
     bpy.ops.wm.read_factory_settings(use_empty=True)
     world.clear_cache()
     scene = bpy.context.scene
     scene.world = bpy.data.worlds.new("World")
     bg = scene.world.node_tree.nodes["Background"]
     bg.inputs["Color"].default_value = (1, 1, 1, 1)
-    bg.inputs["Strength"].default_value = 1.0
+    bg.inputs["Strength"].default_value = sky
     material = bpy.data.materials.new("Diffuse")
     material.use_nodes = True
     bsdf = material.node_tree.nodes["Principled BSDF"]
     bsdf.inputs["Base Color"].default_value = (0.8, 0.8, 0.8, 1)
     bsdf.inputs["Roughness"].default_value = 1.0
     bsdf.inputs["Specular IOR Level"].default_value = 0.0
-    bpy.ops.mesh.primitive_plane_add(size=4.0)
+    bpy.ops.mesh.primitive_plane_add(size=6.0 if scene_name == "corner" else 4.0)
     floor = bpy.context.active_object
     floor.name = "Floor"
     floor.data.uv_layers.new(name="lightmap")
     floor.data.materials.append(_basis_material(material, basis_vector) if basis_vector is not None else material)
-    bpy.ops.mesh.primitive_cube_add(size=1.0, location=(0.3, 0.2, 0.5))
-    cube = bpy.context.active_object
-    cube.data.materials.append(material)
+    if scene_name == "floor":
+        bpy.ops.mesh.primitive_cube_add(size=1.0, location=(0.3, 0.2, 0.5))
+        others = [bpy.context.active_object]
+        others[0].data.materials.append(material)
+    else:
+        others = _room(material) if scene_name == "room" else _corner(material)
+    if lamp != "none":
+        _lamp(lamp, scene_name == "corner")
     if cuts:  # bounce light is carried per vertex: finer meshes carry it better
-        for obj in (floor, cube):
+        for obj in [floor] + others:
             bpy.ops.object.select_all(action="DESELECT")
             obj.select_set(True)
             bpy.context.view_layer.objects.active = obj
@@ -59,7 +120,8 @@ def build(sun, cuts=0, basis_vector=None):
             bpy.ops.mesh.subdivide(number_cuts=cuts)
             bpy.ops.object.mode_set(mode="OBJECT")
     if sun:
-        bpy.ops.object.light_add(type="SUN", rotation=(math.radians(40), 0, math.radians(30)))
+        rotation = (0, math.radians(55), math.radians(10)) if scene_name == "room" else (math.radians(40), 0, math.radians(30))
+        bpy.ops.object.light_add(type="SUN", rotation=rotation)
         bpy.context.active_object.data.energy = 3.0
         bpy.context.active_object.data.angle = math.radians(1.0)
     return scene, floor, floor.data.materials[0]
@@ -83,6 +145,7 @@ def cycles_bake(scene, floor, material, resolution, samples, bounces, margin):
     scene.render.engine = "CYCLES"
     scene.cycles.device = "CPU"
     scene.cycles.samples = samples
+    scene.cycles.use_adaptive_sampling = False  # a sample count, not a noise threshold, sets the time
     scene.cycles.diffuse_bounces = bounces
     scene.cycles.max_bounces = max(bounces, 1)
     scene.render.bake.margin = margin
@@ -101,43 +164,82 @@ def cycles_bake(scene, floor, material, resolution, samples, bounces, margin):
     return pixels.astype(np.float32), seconds
 
 
-def main(argv=None):
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--resolution", type=int, default=32)
-    parser.add_argument("--samples", type=int, default=1024, help="Cycles samples")
-    parser.add_argument("--bounces", type=int, default=0)
-    parser.add_argument("--no-sun", action="store_true")
-    parser.add_argument("--cuts", type=int, default=0, help="subdivide the floor and the box (edge cuts)")
-    parser.add_argument("--map", choices=("flat", "b0", "b1", "b2"), default="flat")
-    args = parser.parse_args(argv)
-    vector = None if args.map == "flat" else lm.HL2[int(args.map[1])]
-    scene, floor, material = build(not args.no_sun, args.cuts, vector)
-    with tempfile.TemporaryDirectory() as folder:
-        t0 = time.perf_counter()
-        ours = lm.read_exr(lightmaps.bake_lightmaps(scene, [floor], resolution=args.resolution,
-                                                    basis="flat" if args.map == "flat" else "hl2",
-                                                    bounces=args.bounces, samples=4, margin=2, out_dir=folder,
-                                                    images=False)["Floor"])
-        ours_seconds = time.perf_counter() - t0
-    reference, cycles_seconds = cycles_bake(scene, floor, material, args.resolution, args.samples, args.bounces, 2)
-    covered = ours["coverage"] > 0
+def footprints(floor, resolution):
+    """Texels that an object standing on the floor covers, even in part. Cycles bakes each
+    texel over its area, so a texel partly under a wall is darkened by the point inside it;
+    ours averages the valid part only (receivers inside geometry never leak or darken)."""
+    size = floor.dimensions.x
+    out = np.zeros((resolution, resolution), bool)
+    for obj in bpy.context.scene.objects:
+        if obj.type != "MESH" or obj == floor:
+            continue
+        corners = np.array([obj.matrix_world @ mathutils.Vector(c) for c in obj.bound_box])
+        if corners[:, 2].min() > 1e-3:
+            continue
+        (u0, v0), (u1, v1) = corners[:, :2].min(0) / size + 0.5, corners[:, :2].max(0) / size + 0.5
+        cols = np.arange(resolution)
+        c = (cols + 1 > u0 * resolution) & (cols < u1 * resolution)
+        r = (resolution - cols > v0 * resolution) & (resolution - cols - 1 < v1 * resolution)  # row 0 at v = 1
+        out |= r[:, None] & c[None, :]
+    return out
+
+
+def errors(ours, reference, covered, footprint=None):
+    """Relative error per texel (mean over RGB) and the texels compared: covered and brighter
+    than 1 % of the open-sky value; and those away from texels darker than that and from the
+    footprints of objects standing on the floor (`footprints`)."""
     bright = reference[..., 0] > 0.01
-    # Texels under the box: Cycles bakes their centres' point inside the box (black); ours fills
-    # them from valid neighbours (and averages only the valid part of rim texels). Excluded with
-    # a one-texel border, as texels next to a texel darker than 1 %.
     padded = np.pad(bright, 1, constant_values=True)
     clear = np.ones_like(bright)
     for dy in (0, 1, 2):
         for dx in (0, 1, 2):
             clear &= padded[dy:dy + bright.shape[0], dx:dx + bright.shape[1]]
-    relative = np.abs(ours[args.map] - reference).mean(-1) / np.maximum(reference.mean(-1), 1e-6)
-    print(f"{args.map} vs Cycles ({args.samples} samples, {args.bounces} bounces, sun={not args.no_sun}, "
-          f"cuts={args.cuts}); "
-          f"ours {ours_seconds:.2f} s, Cycles {cycles_seconds:.2f} s")
-    for label, keep in (("covered, > 1 %", covered & bright), ("away from the box's footprint", covered & clear)):
+    if footprint is not None:
+        clear &= ~footprint
+    relative = np.abs(ours - reference).mean(-1) / np.maximum(reference.mean(-1), 1e-6)
+    return relative, covered & bright, covered & clear
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--resolution", type=int, default=32)
+    parser.add_argument("--samples", type=int, default=1024, help="Cycles samples of the reference")
+    parser.add_argument("--bounces", type=int, default=0)
+    parser.add_argument("--no-sun", action="store_true")
+    parser.add_argument("--no-sky", action="store_true", help="World strength 0 (lamps only)")
+    parser.add_argument("--cuts", type=int, default=0, help="subdivide every mesh (edge cuts)")
+    parser.add_argument("--map", choices=("flat", "b0", "b1", "b2"), default="flat")
+    parser.add_argument("--scene", choices=("floor", "room", "corner"), default="floor")
+    parser.add_argument("--lamp", choices=("none",) + tuple(LAMPS), default="none")
+    parser.add_argument("--ours-samples", type=int, default=4, help="our supersamples per texel")
+    parser.add_argument("--sweep", default="", help="Cycles sample counts to time against ours, e.g. 16,64,256")
+    args = parser.parse_args(argv)
+    vector = None if args.map == "flat" else lm.HL2[int(args.map[1])]
+    scene, floor, material = build(not args.no_sun, args.cuts, vector, args.scene, args.lamp,
+                                   0.0 if args.no_sky else 1.0)
+    with tempfile.TemporaryDirectory() as folder:
+        t0 = time.perf_counter()
+        ours = lm.read_exr(lightmaps.bake_lightmaps(scene, [floor], resolution=args.resolution,
+                                                    basis="flat" if args.map == "flat" else "hl2",
+                                                    bounces=args.bounces, samples=args.ours_samples, margin=2,
+                                                    out_dir=folder, images=False)["Floor"])
+        ours_seconds = time.perf_counter() - t0
+    reference, cycles_seconds = cycles_bake(scene, floor, material, args.resolution, args.samples, args.bounces, 2)
+    covered = ours["coverage"] > 0
+    footprint = footprints(floor, args.resolution)
+    relative, bright, clear = errors(ours[args.map], reference, covered, footprint)
+    print(f"{args.map} vs Cycles ({args.scene}, lamp {args.lamp}, {args.samples} samples, {args.bounces} bounces, "
+          f"sun={not args.no_sun}, sky={not args.no_sky}, cuts={args.cuts}); ours {ours_seconds:.2f} s, Cycles {cycles_seconds:.2f} s")
+    for label, keep in (("covered, > 1 %", bright), ("away from footprints", clear)):
         error = relative[keep]
         print(f"  {label}: mean {100 * error.mean():.2f} %, median {100 * np.median(error):.2f} %, "
               f"worst {100 * error.max():.1f} % over {keep.sum()} texels")
+    ours_error = relative[clear].mean()
+    for samples in [int(x) for x in args.sweep.split(",") if x]:
+        image, seconds = cycles_bake(scene, floor, material, args.resolution, samples, args.bounces, 2)
+        rel = errors(image, reference, covered, footprint)[0][clear].mean()
+        print(f"  Cycles {samples:5d} samples: {seconds:7.2f} s, mean error {100 * rel:.2f} % "
+              f"({'<=' if rel <= ours_error else '>'} ours {100 * ours_error:.2f} %, ours {ours_seconds:.2f} s)")
     return relative
 
 

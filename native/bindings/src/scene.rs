@@ -4,7 +4,7 @@
 
 use hemishadow_engine as engine;
 use numpy::ndarray::{Array1, Array2, Array3};
-use numpy::{IntoPyArray, PyArray1, PyArray2, PyArray3, PyReadonlyArray1, PyReadonlyArray2};
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyArray3, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 
@@ -168,6 +168,22 @@ impl PyScene {
         Ok(Array2::from_shape_vec((p.len(), words), flat).expect("P x words").into_pyarray(py))
     }
 
+    /// Masks (P, 16) uint64 and validity (P,) from one rasterization each.
+    fn visibility_valid<'py>(
+        &mut self,
+        py: Python<'py>,
+        points: PyReadonlyArray2<f32>,
+        normals: PyReadonlyArray2<f32>,
+        offset: Option<f32>,
+    ) -> PyResult<(Bound<'py, PyArray2<u64>>, Bound<'py, PyArray1<bool>>)> {
+        let (p, n) = (rows3(&points, "points")?, rows3(&normals, "normals")?);
+        let inner = &mut self.inner;
+        let (masks, valid) = run(py, || inner.visibility_valid(&p, &n, offset))?;
+        let words = engine::disk_mask::MASK_WORDS;
+        let flat: Vec<u64> = masks.iter().flat_map(|m| m.0).collect();
+        Ok((Array2::from_shape_vec((p.len(), words), flat).expect("P x words").into_pyarray(py), Array1::from_vec(valid).into_pyarray(py)))
+    }
+
     fn valid<'py>(
         &mut self,
         py: Python<'py>,
@@ -179,6 +195,51 @@ impl PyScene {
         let inner = &mut self.inner;
         let valid = run(py, || inner.valid(&p, &n, offset))?;
         Ok(Array1::from_vec(valid).into_pyarray(py))
+    }
+
+    /// Lobe integrals over packed masks (`engine::scene::lobes`): masks (P, 16) uint64, lobes
+    /// (P, L, 3) in each receiver's frame, moments (1024, 3), values (1024, K) -> (P, L, K).
+    #[staticmethod]
+    fn lobe_integrals<'py>(
+        py: Python<'py>,
+        masks: PyReadonlyArray2<u64>,
+        lobes: PyReadonlyArray3<f32>,
+        moments: PyReadonlyArray2<f32>,
+        values: PyReadonlyArray2<f32>,
+    ) -> PyResult<Bound<'py, PyArray3<f32>>> {
+        let words = engine::disk_mask::MASK_WORDS;
+        let m = masks.as_array();
+        if m.shape()[1] != words {
+            return Err(PyValueError::new_err(format!("masks must have shape (P, {words}), got {:?}", m.shape())));
+        }
+        let masks: Vec<engine::disk_mask::Mask> =
+            m.outer_iter().map(|r| engine::disk_mask::Mask(std::array::from_fn(|i| r[i]))).collect();
+        let l = lobes.as_array();
+        if l.shape()[0] != masks.len() || l.shape()[2] != 3 {
+            return Err(PyValueError::new_err(format!("lobes must have shape ({}, L, 3), got {:?}", masks.len(), l.shape())));
+        }
+        let count = l.shape()[1];
+        let dirs: Vec<[f32; 3]> = l.as_standard_layout().as_slice().expect("standard layout").chunks(3).map(|c| [c[0], c[1], c[2]]).collect();
+        let mom = rows3(&moments, "moments")?;
+        let vals = values.as_array();
+        let k = vals.shape()[1];
+        let flat: Vec<f32> = vals.iter().copied().collect();
+        let out = run(py, || engine::scene::lobes::lobe_integrals(&masks, &dirs, count, &mom, &flat))?;
+        Ok(Array3::from_shape_vec((masks.len(), count, k), out).expect("P x L x K").into_pyarray(py))
+    }
+
+    /// bool (P,): whether anything crosses the segment from each point to its target.
+    fn occluded<'py>(
+        &mut self,
+        py: Python<'py>,
+        points: PyReadonlyArray2<f32>,
+        targets: PyReadonlyArray2<f32>,
+        offset: Option<f32>,
+    ) -> PyResult<Bound<'py, PyArray1<bool>>> {
+        let (p, t) = (rows3(&points, "points")?, rows3(&targets, "targets")?);
+        let inner = &mut self.inner;
+        let hit = run(py, || inner.occluded(&p, &t, offset))?;
+        Ok(Array1::from_vec(hit).into_pyarray(py))
     }
 
     #[pyo3(signature = (points, normals, bands, offset, progress=None))]

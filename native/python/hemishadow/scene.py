@@ -185,6 +185,23 @@ class Scene:
         pts, norms = self._receivers(points, normals)
         return self._native.visibility(pts, norms, _checks.offset(offset))
 
+    def occluded(self, points, targets, *, offset=None):
+        """bool (P,): True where any triangle crosses the segment from points[i] to
+        targets[i] (lamps at a finite distance); exact tests on every triangle, never the
+        hierarchy's proxies. `offset` (a fraction of the scene's size, as for receivers) is
+        left out at both ends: the surface a point lies on and the lamp's own surface."""
+        pts = _checks.points(points, "points")
+        tgts = _checks.points(targets, "targets")
+        if len(tgts) != len(pts):
+            raise ValueError(f"targets has {len(tgts)} rows but points has {len(pts)}")
+        return self._native.occluded(pts, tgts, _checks.offset(offset))
+
+    def visibility_valid(self, points, normals, *, offset=None):
+        """(`visibility`, `valid`) from one rasterization per receiver through the ordered
+        mode's depth buffer: cheaper than both calls where most receivers need the validity."""
+        pts, norms = self._receivers(points, normals)
+        return self._native.visibility_valid(pts, norms, _checks.offset(offset))
+
     def gather(self, points, normals=None, *, bands=3, offset=None, progress=None):
         """Ordered mode: SH projection float32 (P, bands*bands, 3) of the radiance arriving
         from the nearest blocker in each direction (`set_radiance`, interpolated

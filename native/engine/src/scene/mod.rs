@@ -14,9 +14,11 @@ pub mod affine;
 pub mod casters;
 pub mod clusters;
 pub mod gather;
+pub mod lobes;
 pub mod ordered;
 pub mod pinholes;
 pub mod receivers;
+pub mod segments;
 pub mod top;
 pub mod traverse;
 
@@ -381,6 +383,48 @@ impl Scene {
                 receivers::is_valid(&sink.back)
             })
             .collect())
+    }
+
+    /// Per segment from `points[i]` to `targets[i]`, whether any triangle of the scene crosses
+    /// it (exact tests on every triangle, no proxies); `offset` (a fraction of `size()`, as for
+    /// receivers) is left out at both ends. For lamps at a finite distance (`segments`).
+    pub fn occluded(&mut self, points: &[Vec3], targets: &[Vec3], offset: Option<f32>) -> Result<Vec<bool>> {
+        receivers::check(points, None)?;
+        if targets.len() != points.len() {
+            return Err(Error::invalid(format!("targets has {} rows but points has {}", targets.len(), points.len())));
+        }
+        receivers::check(targets, None)?;
+        let offset = receivers::offset(offset, self.size())?;
+        let (trees, positions) = self.walk_parts();
+        let segments = segments::Segments::new(&trees, &positions, &self.instances, self.top.as_ref().expect("prepared"));
+        Ok(points
+            .par_iter()
+            .zip(targets)
+            .map_init(Vec::new, |stack, (p, t)| segments.occluded(*p, *t, offset, stack))
+            .collect())
+    }
+
+    /// `visibility` and `valid` from one rasterization per receiver (the ordered mode's depth
+    /// buffer): the mask is the covered cells with pinholes closed as `visibility` closes them.
+    /// Cheaper than both calls where most receivers need the validity (closed rooms).
+    pub fn visibility_valid(&mut self, points: &[Vec3], normals: &[Vec3], offset: Option<f32>) -> Result<(Vec<Mask>, Vec<bool>)> {
+        receivers::check(points, Some(normals))?;
+        let offset = receivers::offset(offset, self.size())?;
+        let table = PlaneTable::shared(self.table_resolution)?;
+        let (trees, positions) = self.walk_parts();
+        let walk = Walk { trees: &trees, positions: &positions, instances: &self.instances, top: self.top.as_ref().expect("prepared"), lod: self.lod, exclude: &[] };
+        let radiance: Vec<Option<&[Rgb]>> = vec![None; self.instances.len()];
+        let full = disk();
+        Ok(points
+            .par_iter()
+            .zip(normals)
+            .map_init(Vec::new, |scratch, (p, n)| {
+                let receiver = receivers::receiver(*p, *n, offset);
+                let mut sink = DepthSink::new(&table, &radiance);
+                walk.run(&receiver, scratch, &mut sink);
+                (pinholes::close(&sink.covered(), &full, traverse::PINHOLE_NEIGHBOURS), receivers::is_valid(&sink.back))
+            })
+            .unzip())
     }
 
     /// Ordered mode: the SH projection (bands^2 x 3 per point, coefficient-major) of the

@@ -15,6 +15,7 @@ from .basis import HL2
 from .exr import read as read_exr
 from .exr import write as write_exr
 from .geometry import Surface, Target
+from .lamps import Area, Point, Spot
 from .light import Sun
 
-__all__ = ["BASES", "HL2", "Sun", "Surface", "Target", "bake", "read_exr", "write_exr"]
+__all__ = ["Area", "BASES", "HL2", "Point", "Spot", "Sun", "Surface", "Target", "bake", "read_exr", "write_exr"]

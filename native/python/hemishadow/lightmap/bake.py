@@ -15,11 +15,13 @@ import numpy as np
 
 from .. import Cancelled
 from . import basis as frames
-from . import bounce, cells, dilate, geometry, light, seams, texels
+from . import bounce, cells, dilate, geometry, lamps as lamp_models, light, seams, texels
 from .geometry import Surface, Target
 
 BASES = ("hl2", "sh", "flat")
 _CHUNK = 2048
+_LAMP_CHUNK = 8192
+_MASK_CHUNK = 8192
 
 
 def _positive_int(value, what, minimum=1):
@@ -48,7 +50,7 @@ def _suns(suns):
             raise ValueError(f"sun {i}: strength must be a finite number or RGB triple")
         if not (np.isfinite(sun.angle) and 0 <= sun.angle < np.pi):
             raise ValueError(f"sun {i}: angle must be in [0, pi) radians, got {sun.angle!r}")
-        out.append(light.Sun(d / np.linalg.norm(d), strength, float(sun.angle)))
+        out.append(light.Sun(d / np.linalg.norm(d), strength, float(sun.angle), bool(getattr(sun, 'indirect_only', False))))
     return out
 
 
@@ -63,7 +65,7 @@ class _Progress:
 
 
 def _direct(scene, points, ng, lobes, lighting, suns, index, offsets, want_sh, offset, progress, masks=None,
-            exact_suns=True, texel_grid=None):
+            exact_suns=True, texel_grid=None, lamps=(), lamp_points=16):
     """Direct light (P, L, 3), ao (P,), L1 SH (P, 4, 3) or None, for samples; `masks` (P, 16)
     are their raw visibility masks when already known (unpacked a chunk at a time: 1 KiB a
     sample unpacked, 128 bytes packed). texel_grid: (texel ids (P,), grid shape (T, R, R))
@@ -77,7 +79,7 @@ def _direct(scene, points, ng, lobes, lighting, suns, index, offsets, want_sh, o
     sh = np.zeros((p, 4, 3), np.float32) if want_sh else None
     for start in range(0, p, _CHUNK):
         s = slice(start, start + _CHUNK)
-        m, a, h = light.environment(cells.unpack(masks[s]), t[s], b[s], ng[s], lobes[s], lighting, want_sh)
+        m, a, h = light.environment(masks[s], t[s], b[s], ng[s], lobes[s], lighting, want_sh)
         maps[s], ao[s] = m, a
         if want_sh:
             sh[s] = h
@@ -96,6 +98,15 @@ def _direct(scene, points, ng, lobes, lighting, suns, index, offsets, want_sh, o
         maps += m
         if want_sh:
             sh += h
+    for lamp in lamps:
+        for start in range(0, p, _LAMP_CHUNK):
+            s = slice(start, start + _LAMP_CHUNK)
+            m, h = lamp_models.lamp_light(scene, lamp, points[s], ng[s], lobes[s], index[s], offsets, lamp_points,
+                                          offset, want_sh)
+            maps[s] += m
+            if want_sh:
+                sh[s] += h
+            progress.step(0)  # lets a cancel through between chunks
     return maps, ao, sh
 
 
@@ -149,8 +160,8 @@ def _texel_maps(tx, resolution, values, valid):
     return out.reshape(resolution, resolution, -1).astype(np.float32), (count > 0).reshape(resolution, resolution)
 
 
-def bake(scene, targets, *, resolution, lighting=None, suns=(), surfaces=(), bounces=2, samples=4, margin=2,
-         basis="hl2", offset=None, stitch_seams=True, adaptive_suns=True, progress=None):
+def bake(scene, targets, *, resolution, lighting=None, suns=(), lamps=(), surfaces=(), bounces=2, samples=4, margin=2,
+         basis="hl2", offset=None, stitch_seams=True, adaptive_suns=True, lamp_points=16, progress=None):
     """Bakes lightmaps of `targets` (`Target`s) in `scene` (a `hemishadow.Scene` holding every
     blocker); returns one dict of maps per target (see the module docstring).
 
@@ -158,6 +169,10 @@ def bake(scene, targets, *, resolution, lighting=None, suns=(), surfaces=(), bou
     lighting: environment SH (K, 3), K = 1, 4, 9, 16 or 25, radiance in the project's convention
         (`hemishadow.project_environment`, the add-on's World); None: no environment.
     suns: `Sun`s (direction towards the light, strength in W/m^2, angular diameter).
+    lamps: `Point`, `Spot` and `Area` lamps (`lamps.py`; DESIGN.md's power conventions).
+        Suns and lamps with `indirect_only` light the bounce surfaces but not the maps.
+    lamp_points: points per receiver sample on each lamp with a size (soft shadows; a g x g
+        grid, g = round(sqrt(lamp_points))); lamps without size use one.
     surfaces: `Surface`s of the meshes that reflect or emit light besides the targets' own
         (bounce receivers at their vertices); meshes not described stay black (block only).
     bounces: diffuse bounces (0: direct light only). samples: supersamples per texel, in total.
@@ -175,6 +190,10 @@ def bake(scene, targets, *, resolution, lighting=None, suns=(), surfaces=(), bou
     if basis not in BASES:
         raise ValueError(f"basis must be one of {BASES}, got {basis!r}")
     lighting, suns = _lighting(lighting), _suns(suns)
+    lamps = [lamp_models.check(lamp, i) for i, lamp in enumerate(lamps)]
+    lamp_points = _positive_int(lamp_points, "lamp_points")
+    direct_suns = [s for s in suns if not s.indirect_only]
+    direct_lamps = [lamp for lamp in lamps if not lamp.indirect_only]
     want_sh = basis == "sh"
     offs = texels.offsets(samples)
 
@@ -190,16 +209,17 @@ def bake(scene, targets, *, resolution, lighting=None, suns=(), surfaces=(), bou
     steps = _Progress(progress, len(points) + vertex_count * (1 + bounces) + len(points) * bool(receivers))
     usable = np.linalg.norm(ng, axis=1) > 0.5  # zero-area triangles have no normal
     ng = np.where(usable[:, None], ng, n)
-    masks = scene.visibility(points, ng, offset=offset)
-    valid = _valid(scene, points, ng, masks, offset) & usable
+    masks, valid = _masks_and_valid(scene, points, ng, offset)
+    valid &= usable
     r = max(sizes)
     texel_id = np.concatenate([(k * r + g[0].texel // sz) * r + g[0].texel % sz
                                for k, (g, sz) in enumerate(zip(geo, sizes))])  # (target, row, col) in a T x r x r grid
     grid = (texel_id, (len(geo), r, r)) if adaptive_suns else None
-    maps, ao, sh = _direct(scene, points, ng, lobes, lighting, suns, index, offs, want_sh, offset, steps, masks,
-                           texel_grid=grid)
+    maps, ao, sh = _direct(scene, points, ng, lobes, lighting, direct_suns, index, offs, want_sh, offset, steps, masks,
+                           texel_grid=grid, lamps=direct_lamps, lamp_points=lamp_points)
     if receivers:
-        gathered = _indirect(scene, receivers, points, ng, valid, texel_id, lighting, suns, offs, bounces, offset, steps)
+        gathered = _indirect(scene, receivers, points, ng, valid, texel_id, lighting, suns, lamps, offs, bounces,
+                             offset, steps)
         if gathered is not None:
             maps += bounce.lobe_irradiance(gathered, lobes)
             if want_sh:
@@ -226,7 +246,7 @@ def _targets_and_sizes(targets, resolution):
     return targets, [_positive_int(resolution, "resolution")] * len(targets)
 
 
-def _indirect(scene, receivers, points, ng, valid, texel_id, lighting, suns, offsets, bounces, offset, steps):
+def _indirect(scene, receivers, points, ng, valid, texel_id, lighting, suns, lamps, offsets, bounces, offset, steps):
     """Gathered SH (P, 9, 3) of the light the samples receive from the surfaces after
     `bounces` passes, gathered once per texel; None when every surface is black."""
     direct = []
@@ -235,7 +255,7 @@ def _indirect(scene, receivers, points, ng, valid, texel_id, lighting, suns, off
         if ok.any():
             # bounce light is soft: the proxies' sun shadows do (lod 0 costs 4x and more)
             d[ok] = _direct(scene, pts[ok], nrm[ok], nrm[ok][:, None], lighting, suns, np.zeros(ok.sum(), np.int64),
-                            offsets, False, offset, steps, exact_suns=False)[0][:, 0]
+                            offsets, False, offset, steps, exact_suns=False, lamps=lamps, lamp_points=1)[0][:, 0]
         direct.append(d)
     radiance = bounce.vertex_radiance(scene, receivers, direct, bounces, offset)
     steps.step(sum(len(r[1]) for r in receivers) * bounces)
@@ -247,12 +267,36 @@ def _indirect(scene, receivers, points, ng, valid, texel_id, lighting, suns, off
 
 def _valid(scene, points, ng, masks, offset):
     """`Scene.valid` where it can be False: a receiver is invalid when back faces cover more
-    than half its disk's cells, so one with at most half its cells blocked is valid."""
+    than half its disk's cells, so one with at most half its cells blocked is valid (the
+    probes use it with masks they already have)."""
     valid = np.ones(len(points), bool)
     maybe = np.bitwise_count(masks).sum(axis=1) > 0.45 * cells.directions().any(axis=1).sum()
     if maybe.any():
         valid[maybe] = scene.valid(points[maybe], ng[maybe], offset=offset)
     return valid
+
+
+def _masks_and_valid(scene, points, ng, offset):
+    """Raw masks (P, 16) and validity (P,) of the samples. `Scene.valid` is asked only where
+    more than 45 % of a mask is blocked (it cannot fail below half), a second rasterization;
+    in chunks where most samples need it (closed rooms), one `Scene.visibility_valid` call
+    gives both. Chunks follow texel order, so each chunk's need predicts the next one's."""
+    masks = np.empty((len(points), 16), np.uint64)
+    valid = np.ones(len(points), bool)
+    limit = 0.45 * cells.directions().any(axis=1).sum()
+    combined = False
+    for start in range(0, len(points), _MASK_CHUNK):
+        s = slice(start, start + _MASK_CHUNK)
+        if combined:
+            masks[s], valid[s] = scene.visibility_valid(points[s], ng[s], offset=offset)
+            maybe = np.bitwise_count(masks[s]).sum(axis=1) > limit
+        else:
+            masks[s] = scene.visibility(points[s], ng[s], offset=offset)
+            maybe = np.bitwise_count(masks[s]).sum(axis=1) > limit
+            if maybe.any():
+                valid[s][maybe] = scene.valid(points[s][maybe], ng[s][maybe], offset=offset)
+        combined = maybe.mean() > 0.5
+    return masks, valid
 
 
 def _representatives(texel_id, valid):

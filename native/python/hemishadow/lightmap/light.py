@@ -9,15 +9,15 @@ The transfer vectors of `Scene.transfer` cannot clip a tilted lobe at the surfac
 
 Environment: radiance per cell from the lighting rotated into each receiver's frame (fitted
 exactly, band by band, on directions over the sphere). Suns: one exact shadow ray per sample,
-a visibility query whose normal is tilted so that the sun's direction passes through the
-centre of one of the mask's four central cells, drawn with every triangle (lod 0).
+the engine's segment test to a point beyond the scene (bounce receivers: a mask query through
+the scene's proxies, whose normal is tilted so that the sun passes through a central cell).
 """
 
 from dataclasses import dataclass
 
 import numpy as np
 
-from .. import sh_basis
+from .. import _native, sh_basis
 from . import basis, cells
 
 
@@ -25,10 +25,12 @@ from . import basis, cells
 class Sun:
     """A sun lamp: `direction` towards the light (world), `strength` the irradiance in W/m^2
     on a surface facing it (scalar or RGB, Blender's Strength x colour), `angle` its angular
-    diameter in radians (its disk is sampled across a texel's samples)."""
+    diameter in radians (its disk is sampled across a texel's samples). indirect_only: it
+    lights bounce surfaces but not the maps (a lamp the game engine renders in real time)."""
     direction: tuple
     strength: object = 1.0
     angle: float = 0.0
+    indirect_only: bool = False
 
 
 def _fibonacci(count):
@@ -47,32 +49,34 @@ def local_lighting(lighting, t, b, n):
     fit = np.linalg.pinv(sh_basis(dirs, bands).astype(np.float64))  # (K, 3K)
     world = dirs[None, :, 0:1] * t[:, None] + dirs[None, :, 1:2] * b[:, None] + dirs[None, :, 2:3] * n[:, None]
     radiance = (sh_basis(world.reshape(-1, 3), bands) @ lighting).reshape(len(t), 3 * k, 3)
-    return np.einsum("kd,pdc->pkc", fit, radiance).astype(np.float32)
+    flat = radiance.transpose(1, 0, 2).reshape(3 * k, -1)  # one BLAS product, not einsum's loops
+    return (fit.astype(np.float32) @ flat).reshape(k, len(t), 3).transpose(1, 0, 2).astype(np.float32)
 
 
-def environment(blocked, t, b, n, lobes, lighting, want_sh=False):
+def environment(masks, t, b, n, lobes, lighting, want_sh=False):
     """Irradiance / pi (P, L, 3) for unit lobe directions (P, L, 3) (world) of receivers with
-    masks `blocked` (P, 1024) taken in the engine frame (t, b, n) of their geometric normals;
-    the open fraction of the first lobe (P,); and with want_sh the L1 SH (P, 4, 3) of the
-    incident radiance / pi (world), else None."""
+    packed masks (P, 16) uint64 taken in the engine frame (t, b, n) of their geometric
+    normals; the open fraction of the first lobe (P,); and with want_sh the L1 SH (P, 4, 3) of
+    the incident radiance / pi (world), else None. The lobe integrals over the open cells run
+    in the engine (`Scene.lobe_integrals`, `cells.lobe_weights` in numpy is the same)."""
     local = np.stack([(lobes * t[:, None]).sum(-1), (lobes * b[:, None]).sum(-1), (lobes * n[:, None]).sum(-1)], -1)
-    weights = cells.lobe_weights(local)                         # (P, L, 1024)
-    open_cells = (~blocked).astype(np.float32)
-    seen = weights * open_cells[:, None, :]
-    ao = seen[:, 0].sum(-1) / np.maximum(weights[:, 0].sum(-1), 1e-30)
+    bands = 0 if lighting is None else int(round(np.sqrt(len(lighting))))
+    y_cells = sh_basis(cells.radiance_directions(), bands) if bands else np.zeros((cells.CELLS, 0), np.float32)
+    values = np.ascontiguousarray(np.concatenate([y_cells, np.ones((cells.CELLS, 1), np.float32)], axis=1), np.float32)
+    moments = np.ascontiguousarray(cells.moments()[:, :3], np.float32)
+    out = _native.Scene.lobe_integrals(np.ascontiguousarray(masks), np.ascontiguousarray(local, np.float32), moments,
+                                       values)
+    ao = out[:, 0, -1] / cells.open_clamped_cosine(local[:, 0, 2]).astype(np.float32)
     if lighting is None:
-        return np.zeros(lobes.shape[:2] + (3,), np.float32), ao, (np.zeros((len(t), 4, 3), np.float32) if want_sh else None)
-    bands = int(round(np.sqrt(len(lighting))))
-    y_cells = sh_basis(cells.radiance_directions(), bands)     # (1024, K)
+        return np.zeros(lobes.shape[:2] + (3,), np.float32), ao.astype(np.float32), (np.zeros((len(t), 4, 3), np.float32) if want_sh else None)
     lit = local_lighting(lighting, t, b, n)                     # (P, K, 3)
-    p, l = seen.shape[:2]
-    transfer = (seen.reshape(p * l, -1) @ y_cells).reshape(p, l, -1)
-    maps = np.einsum("plk,pkc->plc", transfer, lit) / np.float32(np.pi)
+    maps = np.matmul(out[..., :-1], lit) / np.float32(np.pi)
     sh = None
     if want_sh:
-        moments = cells.moments().astype(np.float32)
-        per_cell = np.stack([basis.Y00 * moments[:, 3], -basis.C1 * moments[:, 1], basis.C1 * moments[:, 2],
-                             -basis.C1 * moments[:, 0]], axis=1)  # integral of Y_k over each cell
+        open_cells = (~cells.unpack(masks)).astype(np.float32)
+        moments4 = cells.moments().astype(np.float32)
+        per_cell = np.stack([basis.Y00 * moments4[:, 3], -basis.C1 * moments4[:, 1], basis.C1 * moments4[:, 2],
+                             -basis.C1 * moments4[:, 0]], axis=1)  # integral of Y_k over each cell
         radiance = np.einsum("ck,pkj->pcj", y_cells, lit)
         local_sh = np.einsum("pc,pcj,ck->pkj", open_cells, radiance, per_cell)
         sh = basis.l1_to_world(local_sh, t, b, n) / np.float32(np.pi)
@@ -127,17 +131,25 @@ def engine_frame_f32(q):
 
 
 def sun_visibility(scene, points, ng, directions, offset=None, exact=True):
-    """1.0 where the ray from each point towards `directions` (P, 3) is open, else 0.0 (the
-    four central cells' mean where no query normal was found, which does not happen for
-    unit directions). exact: with every triangle (lod 0); else with the scene's proxies."""
+    """1.0 where the ray from each point towards `directions` (P, 3) is open, else 0.0.
+    exact: the engine's segment test (`Scene.occluded`, every triangle, no proxies) to a
+    point beyond the scene; else a mask query with the scene's proxies (`_mask_visibility`,
+    soft bounce light only)."""
+    if not exact:
+        return _mask_visibility(scene, points, ng, directions, offset)
+    size = scene.size
+    lift = size * (1e-4 if offset is None else offset)
+    start = points + ng * lift
+    far = start + directions * (2.0 * size + 1.0)
+    return (~scene.occluded(start, far, offset=offset)).astype(np.float32)
+
+
+def _mask_visibility(scene, points, ng, directions, offset):
+    """A visibility query whose normal is tilted so that the direction passes through the
+    centre of one of the mask's four central cells (the four cells' mean where no normal was
+    found, which does not happen for unit directions)."""
     q, cell = shadow_normals(directions, ng)
-    lod = scene.lod
-    if exact:
-        scene.lod = 0.0  # every triangle: the hierarchy's proxies cast false sun shadows (docs/lightmaps.md)
-    try:
-        blocked = cells.unpack(scene.visibility(points, q, offset=offset))
-    finally:
-        scene.lod = lod
+    blocked = cells.unpack(scene.visibility(points, q, offset=offset))
     found = cell >= 0
     lit = np.where(found, ~blocked[np.arange(len(q)), np.maximum(cell, 0)], False).astype(np.float32)
     if not found.all():

@@ -1,0 +1,203 @@
+"""Point, spot and area lamps at receivers (DESIGN.md's power conventions, as Cycles renders
+them): a point lamp of power P radiates P / (4 pi) W/sr, a spot the same masked by its cone
+and blend, an area lamp of power P and area A is a one-sided Lambertian emitter of radiance
+P / (pi A) facing its local -Z. Colour multiplies power (`power` may be RGB).
+
+A mask has no depth, so lamps at a finite distance use the engine's exact segment test
+(`Scene.occluded`). Soft shadows: each receiver sample sees `points` stratified points on the
+lamp (a g x g grid on the lamp's disk or rectangle, shifted by the sample's offset inside its
+texel, so a texel's samples see different points; deterministic, no noise between bakes).
+Each point carries its share of the lamp: I / n for points and spots (the lamp's sphere or
+disk only softens shadows, as in Cycles), L A / n x cos at the lamp for areas.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import basis, cells
+
+SHAPES = ("SQUARE", "RECTANGLE", "DISK", "ELLIPSE")
+
+
+@dataclass
+class Point:
+    """A point lamp at `position` (world) of `power` W (scalar or RGB, power x colour) with
+    Blender's `radius` (m; softens shadows). indirect_only: lights bounce, not the maps."""
+    position: tuple
+    power: object = 1000.0
+    radius: float = 0.0
+    indirect_only: bool = False
+
+
+@dataclass
+class Spot:
+    """A spot lamp: a point lamp masked by a cone around `direction` (where it points, world;
+    Blender's local -Z) of full angle `spot_size` (radians) with `spot_blend` (0..1)."""
+    position: tuple
+    direction: tuple
+    power: object = 1000.0
+    radius: float = 0.0
+    spot_size: float = np.pi / 4
+    spot_blend: float = 0.15
+    indirect_only: bool = False
+
+
+@dataclass
+class Area:
+    """An area lamp centred at `position`, emitting along `direction` (its local -Z, world),
+    `axis_u` its local +X (world); Blender's shape and size (`size_y` for RECTANGLE and
+    ELLIPSE, else `size`)."""
+    position: tuple
+    direction: tuple
+    axis_u: tuple
+    power: object = 1000.0
+    shape: str = "SQUARE"
+    size: float = 1.0
+    size_y: float = 1.0
+    indirect_only: bool = False
+
+
+def check(lamp, i):
+    """The lamp with float arrays, or ValueError naming it."""
+    label = f"lamp {i} ({type(lamp).__name__})"
+    pos = _vector(lamp.position, f"{label}: position")
+    power = np.broadcast_to(np.asarray(lamp.power, dtype=np.float64), (3,)).copy()
+    if np.asarray(lamp.power).size not in (1, 3) or not np.isfinite(power).all():
+        raise ValueError(f"{label}: power must be a finite number or RGB triple")
+    if isinstance(lamp, (Point, Spot)):
+        if not (np.isfinite(lamp.radius) and lamp.radius >= 0):
+            raise ValueError(f"{label}: radius must be >= 0, got {lamp.radius!r}")
+    if isinstance(lamp, Point):
+        return Point(pos, power, float(lamp.radius), bool(lamp.indirect_only))
+    if isinstance(lamp, Spot):
+        if not (0 < lamp.spot_size <= np.pi and 0 <= lamp.spot_blend <= 1):
+            raise ValueError(f"{label}: spot_size must be in (0, pi] and spot_blend in [0, 1]")
+        return Spot(pos, _unit(lamp.direction, f"{label}: direction"), power, float(lamp.radius),
+                    float(lamp.spot_size), float(lamp.spot_blend), bool(lamp.indirect_only))
+    if isinstance(lamp, Area):
+        if lamp.shape not in SHAPES:
+            raise ValueError(f"{label}: shape must be one of {SHAPES}, got {lamp.shape!r}")
+        d = _unit(lamp.direction, f"{label}: direction")
+        u = _vector(lamp.axis_u, f"{label}: axis_u")
+        u = u - d * (u @ d)
+        if not np.linalg.norm(u) > 1e-9:
+            raise ValueError(f"{label}: axis_u must not be parallel to direction")
+        sy = lamp.size_y if lamp.shape in ("RECTANGLE", "ELLIPSE") else lamp.size
+        if not (lamp.size > 0 and sy > 0):
+            raise ValueError(f"{label}: size must be > 0")
+        return Area(pos, d, u / np.linalg.norm(u), power, lamp.shape, float(lamp.size), float(sy),
+                    bool(lamp.indirect_only))
+    raise ValueError(f"{label}: not a lamp (Point, Spot or Area)")
+
+
+def _vector(v, what):
+    a = np.asarray(v, dtype=np.float64)
+    if a.shape != (3,) or not np.isfinite(a).all():
+        raise ValueError(f"{what} must be 3 finite numbers")
+    return a
+
+
+def _unit(v, what):
+    a = _vector(v, what)
+    if not np.linalg.norm(a) > 0:
+        raise ValueError(f"{what} is zero")
+    return a / np.linalg.norm(a)
+
+
+def grid(points):
+    """The g x g stratified pattern (n, 2) in [0, 1)^2 before the per-sample shift, n = g^2."""
+    g = max(int(round(np.sqrt(points))), 1)
+    x, y = np.meshgrid(np.arange(g) / g, np.arange(g) / g)
+    return np.stack([x.ravel(), y.ravel()], axis=1), g
+
+
+def _unit_square(count, index, offsets, points, sized):
+    """(P, n, 2) points in [0, 1)^2 per receiver sample: the grid shifted by the sample's
+    offset inside its texel (one point at the centre for lamps without size)."""
+    if not sized or points <= 1:
+        return np.full((count, 1, 2), 0.5)
+    pattern, g = grid(points)
+    shift = offsets[index % len(offsets)] / g
+    return pattern[None] + shift[:, None]
+
+
+def _disk(uv):
+    """Concentric map of [0, 1)^2 onto the unit disk (Shirley, Chiu 1997): (..., 2)."""
+    u, v = uv[..., 0] * 2 - 1, uv[..., 1] * 2 - 1
+    big = np.abs(u) > np.abs(v)
+    r = np.where(big, u, v)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        phi = np.where(big, np.pi / 4 * v / np.where(u == 0, 1, u), np.pi / 2 - np.pi / 4 * u / np.where(v == 0, 1, v))
+    return np.stack([r * np.cos(phi), r * np.sin(phi)], axis=-1)
+
+
+def samples(lamp, receivers, index, offsets, points):
+    """Lamp points (P, n, 3) seen by receiver samples (P, 3) and the intensity factor (P, n)
+    of each: irradiance on a surface facing it at distance d is factor / d^2 (W/m^2)."""
+    p = len(receivers)
+    if isinstance(lamp, Area):
+        uv = _unit_square(p, index, offsets, points, True)
+        if lamp.shape in ("DISK", "ELLIPSE"):
+            uv = _disk(uv) * 0.5 + 0.5
+        v_axis = np.cross(lamp.direction, lamp.axis_u)  # local +Y (local -Z x local +X = +Y)
+        local = (uv - 0.5) * [lamp.size, lamp.size_y]
+        pts = lamp.position + local[..., :1] * lamp.axis_u + local[..., 1:] * v_axis
+        area = lamp.size * lamp.size_y * (np.pi / 4 if lamp.shape in ("DISK", "ELLIPSE") else 1.0)
+        radiance = 1.0 / (np.pi * area)  # per watt
+        to_receiver = receivers[:, None] - pts
+        d = np.linalg.norm(to_receiver, axis=-1)
+        cos_lamp = np.maximum((to_receiver * lamp.direction).sum(-1) / np.maximum(d, 1e-30), 0.0)
+        return pts, radiance * area / uv.shape[1] * cos_lamp
+    sized = lamp.radius > 0
+    uv = _unit_square(p, index, offsets, points, sized)
+    to_receiver = receivers - lamp.position
+    axis = to_receiver / np.maximum(np.linalg.norm(to_receiver, axis=1, keepdims=True), 1e-30)
+    t, b = cells.engine_frame(axis)
+    disk = _disk(uv) * lamp.radius
+    pts = lamp.position + disk[..., :1] * t[:, None] + disk[..., 1:] * b[:, None]
+    factor = np.full(pts.shape[:2], 1.0 / (4 * np.pi * uv.shape[1]))
+    if isinstance(lamp, Spot):
+        factor *= spot_mask(lamp, axis)[:, None]
+    return pts, factor
+
+
+def spot_mask(lamp, axis):
+    """Cycles' spot attenuation for unit directions from the lamp (P, 3): smoothstep of
+    (cos - cos(size / 2)) / ((1 - cos(size / 2)) x blend), a hard cone when blend is 0."""
+    cos_half = np.cos(lamp.spot_size / 2)
+    c = axis @ lamp.direction
+    if lamp.spot_blend <= 0:
+        return (c > cos_half).astype(np.float64)
+    x = np.clip((c - cos_half) / ((1 - cos_half) * lamp.spot_blend), 0.0, 1.0)
+    return x * x * (3 - 2 * x)
+
+
+def lamp_light(scene, lamp, points, ng, lobes, index, offsets, lamp_points, offset, want_sh=False):
+    """Irradiance / pi (P, L, 3) of one lamp on lobes (P, L, 3) of receiver samples at
+    `points` with geometric normals `ng`, shadowed by the scene (exact segments), and its
+    L1 SH (P, 4, 3) / pi or None."""
+    pts, factor = samples(lamp, points, index, offsets, lamp_points)
+    p, n = factor.shape
+    to_lamp = pts - points[:, None]
+    d2 = np.maximum((to_lamp ** 2).sum(-1), 1e-30)
+    w = to_lamp / np.sqrt(d2)[..., None]
+    weight = factor / d2 * ((w * ng[:, None]).sum(-1) > 0)
+    todo = weight > 0
+    if todo.any():
+        rows, cols = np.nonzero(todo)
+        lift = _lift(scene, offset)
+        start = points[rows] + ng[rows] * lift
+        weight[rows, cols] *= ~scene.occluded(start, pts[rows, cols], offset=offset)
+    cosine = np.maximum(np.einsum("pld,pnd->pln", lobes, w), 0.0)
+    maps = np.einsum("pln,pn->pl", cosine, weight)[..., None] * lamp.power / np.pi
+    sh = None
+    if want_sh:
+        y = np.stack([np.full((p, n), basis.Y00), -basis.C1 * w[..., 1], basis.C1 * w[..., 2], -basis.C1 * w[..., 0]], -1)
+        sh = np.einsum("pnk,pn->pk", y, weight)[..., None] * lamp.power / np.pi
+    return maps.astype(np.float32), (None if sh is None else sh.astype(np.float32))
+
+
+def _lift(scene, offset):
+    """The receivers' lift in world units (as the engine's masks lift them)."""
+    return scene.size * (1e-4 if offset is None else offset)
