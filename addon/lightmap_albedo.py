@@ -15,7 +15,8 @@ import numpy as np
 DEFAULT = 0.8
 
 
-def _principled(obj):
+def principled(obj):
+    """The first Principled BSDF of the object's materials, or None."""
     for slot in obj.material_slots:
         mat = slot.material
         if mat is not None and mat.node_tree is not None:
@@ -41,7 +42,7 @@ def _warn(message):
 
 def base_color(obj, mesh):
     """(3,) or per vertex (V, 3) linear albedo of `obj`, whose evaluated mesh is `mesh`."""
-    node = _principled(obj)
+    node = principled(obj)
     if node is None:
         return np.full(3, DEFAULT)
     socket = node.inputs["Base Color"]

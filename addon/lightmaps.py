@@ -150,21 +150,10 @@ def _tangents(mesh, loops):
     return np.concatenate([t, sign[:, None]], axis=1)[loops]
 
 
-def principled(obj):
-    """The first Principled BSDF of the object's first material, or None."""
-    for slot in obj.material_slots:
-        mat = slot.material
-        if mat is not None and mat.node_tree is not None:
-            for node in mat.node_tree.nodes:
-                if node.type == "BSDF_PRINCIPLED":
-                    return node
-    return None
-
-
 def emission_of(obj):
     """Emitted radiance (3,) from the Principled BSDF's Emission input values (none without
     one; emission textures are not sampled)."""
-    node = principled(obj)
+    node = lightmap_albedo.principled(obj)
     if node is None:
         return np.zeros(3)
     emission = np.zeros(3)

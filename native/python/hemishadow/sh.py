@@ -24,7 +24,8 @@ def euler_to_matrix(angles):
     return rotation_matrix((0, 0, 1), az) @ rotation_matrix((0, 1, 0), ay) @ rotation_matrix((1, 0, 0), ax)
 
 
-def _fibonacci_directions(count):
+def fibonacci_directions(count):
+    """`count` unit vectors spread evenly over the sphere (a Fibonacci lattice)."""
     k = np.arange(count) + 0.5
     z = 1 - 2 * k / count
     phi = k * np.pi * (3 - np.sqrt(5))
@@ -48,7 +49,7 @@ def rotate_sh(coefficients, matrix):
     rotation = np.asarray(matrix, dtype=np.float64)
     if rotation.shape != (3, 3) or not np.allclose(rotation @ rotation.T, np.eye(3), atol=1e-5):
         raise ValueError("matrix must be a 3x3 rotation")
-    dirs = _fibonacci_directions(4 * k)
+    dirs = fibonacci_directions(4 * k)
     basis = sh_basis(dirs, bands).astype(np.float64)
     rotated_basis = sh_basis(dirs @ rotation, bands).astype(np.float64)  # rows: Y(R^T d)
     solution, *_ = np.linalg.lstsq(basis, rotated_basis @ coeffs, rcond=None)

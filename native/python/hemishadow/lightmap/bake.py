@@ -54,14 +54,17 @@ def _suns(suns):
     return out
 
 
-class _Progress:
-    def __init__(self, callback, total):
-        self.callback, self.total, self.done = callback, max(total, 1), 0
+class Steps:
+    """Progress over `total` steps, reported to `callback` (the engine's convention: a
+    fraction; False cancels, raising Cancelled naming `what`)."""
+
+    def __init__(self, callback, total, what="lightmap bake"):
+        self.callback, self.total, self.done, self.what = callback, max(total, 1), 0, what
 
     def step(self, amount=1):
         self.done += amount
         if self.callback is not None and self.callback(min(self.done / self.total, 1.0)) is False:
-            raise Cancelled("lightmap bake cancelled")
+            raise Cancelled(f"{self.what} cancelled")
 
 
 def _direct(scene, points, ng, lobes, lighting, suns, index, offsets, want_sh, offset, progress, masks=None,
@@ -206,7 +209,7 @@ def bake(scene, targets, *, resolution, lighting=None, suns=(), lamps=(), surfac
 
     receivers = _bounce_receivers(targets, surfaces) if (bounces or _emits(targets, surfaces)) else []
     vertex_count = sum(len(r[1]) for r in receivers)
-    steps = _Progress(progress, len(points) + vertex_count * (1 + bounces) + len(points) * bool(receivers))
+    steps = Steps(progress, len(points) + vertex_count * (1 + bounces) + len(points) * bool(receivers))
     usable = np.linalg.norm(ng, axis=1) > 0.5  # zero-area triangles have no normal
     ng = np.where(usable[:, None], ng, n)
     masks, valid = _masks_and_valid(scene, points, ng, offset)

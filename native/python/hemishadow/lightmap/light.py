@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import _native, sh_basis
+from ..sh import fibonacci_directions
 from . import basis, cells
 
 
@@ -33,19 +34,11 @@ class Sun:
     indirect_only: bool = False
 
 
-def _fibonacci(count):
-    k = np.arange(count) + 0.5
-    z = 1 - 2 * k / count
-    phi = k * np.pi * (3 - np.sqrt(5))
-    r = np.sqrt(1 - z * z)
-    return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
-
-
 def local_lighting(lighting, t, b, n):
     """Lighting SH (K, 3) expressed in each receiver's frame (rows t, b, n): (P, K, 3)."""
     k = len(lighting)
     bands = int(round(np.sqrt(k)))
-    dirs = _fibonacci(3 * k)
+    dirs = fibonacci_directions(3 * k)
     fit = np.linalg.pinv(sh_basis(dirs, bands).astype(np.float64))  # (K, 3K)
     world = dirs[None, :, 0:1] * t[:, None] + dirs[None, :, 1:2] * b[:, None] + dirs[None, :, 2:3] * n[:, None]
     radiance = (sh_basis(world.reshape(-1, 3), bands) @ lighting).reshape(len(t), 3 * k, 3)

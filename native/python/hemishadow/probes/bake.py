@@ -9,8 +9,7 @@ convention of `hemishadow.project_environment`, not divided by pi), `valid` (P,)
 
 import numpy as np
 
-from .. import Cancelled
-from ..lightmap.bake import _bounce_receivers, _direct, _emits, _lighting, _positive_int, _suns
+from ..lightmap.bake import Steps, _bounce_receivers, _direct, _emits, _lighting, _positive_int, _suns
 from ..lightmap import bounce, cells, texels
 from . import capture, grid, validity
 from .cube import sh_to_cube
@@ -40,16 +39,6 @@ def _cell(cell):
     return c
 
 
-class _Progress:
-    def __init__(self, callback, total):
-        self.callback, self.total, self.done = callback, max(total, 1), 0
-
-    def step(self, amount=1):
-        self.done += amount
-        if self.callback is not None and self.callback(min(self.done / self.total, 1.0)) is False:
-            raise Cancelled("probe bake cancelled")
-
-
 def bake(scene, points, *, lighting=None, suns=(), surfaces=(), bounces=2, cell=None, offset=None, progress=None):
     """Bakes probes at `points` (P, 3) in `scene` (a `hemishadow.Scene` of every blocker).
 
@@ -69,7 +58,7 @@ def bake(scene, points, *, lighting=None, suns=(), surfaces=(), bounces=2, cell=
     surfaces = list(surfaces)
     emits = _emits([], surfaces)
     receivers = _bounce_receivers([], surfaces) if surfaces and (bounces or emits) else []
-    steps = _Progress(progress, 3 * len(pts) + sum(len(r[1]) for r in receivers) * (1 + bounces))
+    steps = Steps(progress, 3 * len(pts) + sum(len(r[1]) for r in receivers) * (1 + bounces), "probe bake")
 
     masks = capture.masks(scene, pts, offset)
     valid = validity.check(scene, pts, masks, offset)
