@@ -41,6 +41,14 @@ def grid_of(obj, resolution=None):
     raise ValueError(f"{obj.name}: not a Light Probe Volume or an Empty (it is a {obj.type.lower()})")
 
 
+def active_volume(context):
+    """The active object when it is a Light Probe Volume or an Empty, else None."""
+    obj = context.active_object
+    if obj is not None and (obj.type == "EMPTY" or (obj.type == "LIGHT_PROBE" and obj.data.type == "VOLUME")):
+        return obj
+    return None
+
+
 def scene_geometry(scene, depsgraph=None):
     """(hemishadow.Scene, Surfaces, world triangles (M, 3, 3)) of the bake's meshes."""
     import hemishadow

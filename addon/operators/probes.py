@@ -10,10 +10,7 @@ from .. import probes
 
 
 def _volume(context):
-    obj = context.active_object
-    if obj is not None and (obj.type == "EMPTY" or (obj.type == "LIGHT_PROBE" and obj.data.type == "VOLUME")):
-        return obj
-    return None
+    return probes.active_volume(context)
 
 
 class HEMISHADOW_OT_bake_probes(bpy.types.Operator):

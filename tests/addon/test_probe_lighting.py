@@ -81,3 +81,33 @@ def test_without_baked_probes_the_status_says_so(yard, addon):
     computed, errors, _ = addon.engine_bridge.compute_now(scene, bpy.context.evaluated_depsgraph_get())
     assert ball.name in errors and "holds no baked probes" in errors[ball.name]
     assert "holds no baked probes" in ball.hemishadow.status
+
+
+def test_the_probes_panel_draws_for_a_volume_and_without_one(yard, addon):
+    """The panel's draw with the baked volume active (and a lit object naming it), and with
+    nothing suitable active: labels only, no exception."""
+    from addon import probe_panel
+
+    volume = yard.objects["Volume"]
+    bpy.ops.mesh.primitive_uv_sphere_add(radius=0.3)
+    ball = bpy.context.active_object
+    ball.hemishadow.probe_volume = volume
+
+    class Layout:
+        def __init__(self):
+            self.calls = []
+
+        def label(self, text="", icon="NONE"):
+            self.calls.append(text)
+
+        def operator(self, idname, icon="NONE"):
+            self.calls.append(idname)
+
+    for active, expected in ((volume, ["24 probes baked", "hemishadow.bake_probes", "hemishadow.probe_preview",
+                                       f"Lights {ball.name}"]),
+                             (ball, ["Select a Light Probe Volume or an Empty"])):
+        bpy.context.view_layer.objects.active = active
+        panel = type("P", (), {"layout": Layout()})()
+        probe_panel.HEMISHADOW_PT_probes.draw(panel, bpy.context)
+        text = " | ".join(panel.layout.calls)
+        assert all(e in text for e in expected), text
