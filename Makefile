@@ -1,5 +1,5 @@
 # Entry points for a fresh machine: `make demo` and `make test` install everything first.
-.PHONY: setup setup-all demo demo-lightmaps demo-cli test test-platforms clean extension extensions
+.PHONY: setup setup-all demo demo-lightmaps demo-probes demo-cli test test-platforms clean extension extensions
 
 PY := .venv/bin/python
 
@@ -24,6 +24,12 @@ demo: setup
 demo-lightmaps: setup
 	$(PY) scripts/build_extension.py --if-stale
 	$(PY) scripts/demo_lightmaps.py
+
+# A probe grid baked over the same room corner lights a walking character live (issue 12):
+# out/demo_probes/side_by_side.png, in the sun and in the back wall's shade.
+demo-probes: setup
+	$(PY) scripts/build_extension.py --if-stale
+	$(PY) scripts/demo_probes.py
 
 # The engine alone from the command line: spot.obj (ships in tests/assets) lit by Blender's
 # "forest" HDRI (ships with the bpy module), written to out/spot.glb and out/spot.npz.
