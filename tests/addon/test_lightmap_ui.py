@@ -20,16 +20,26 @@ from addon import lightmap_albedo, lightmap_job, lightmap_nodes, lightmaps, worl
 FLAT_B = (1 + 1 / math.sqrt(3)) / 2
 
 
+def new_material(name):
+    """A node material, as Blender 5 makes them (before 5.0 nodes must be switched on)."""
+    mat = bpy.data.materials.new(name)
+    if mat.node_tree is None:
+        mat.use_nodes = True
+    return mat
+
+
 @pytest.fixture
 def scene():
     bpy.ops.wm.read_factory_settings(use_empty=True)
     world.clear_cache()
-    addon.register()
     scene = bpy.context.scene
     scene.world = bpy.data.worlds.new("World")
+    if scene.world.node_tree is None:  # Blender before 5.0
+        scene.world.use_nodes = True
     background = scene.world.node_tree.nodes["Background"]
     background.inputs["Color"].default_value = (1, 1, 1, 1)
     background.inputs["Strength"].default_value = 1.0
+    addon.register()  # last: a failed set-up must not leave it registered
     yield scene
     addon.unregister()
 
@@ -177,7 +187,7 @@ def test_panel_shows_settings_warnings_and_buttons(scene):
 
 def test_add_to_materials_adds_and_removes_nothing(scene, tmp_path):
     floor = plane()
-    mat = bpy.data.materials.new("Paint")
+    mat = new_material("Paint")
     floor.data.materials.append(mat)
     bsdf = mat.node_tree.nodes["Principled BSDF"]
     bsdf.inputs["Base Color"].default_value = (0.5, 0.25, 1.0, 1.0)
@@ -223,7 +233,7 @@ def test_added_material_renders_base_color_times_lightmap(scene, tmp_path, norma
     """Cycles renders what Add to Materials made: Base Color x flat (1.0 under a white sky)
     without a normal map; with one, the HL2 combination (every b_i is 0.7887 here)."""
     floor = plane(size=2.0)
-    mat = bpy.data.materials.new("Paint")
+    mat = new_material("Paint")
     floor.data.materials.append(mat)
     tree = mat.node_tree
     bsdf = tree.nodes["Principled BSDF"]
@@ -245,7 +255,7 @@ def test_added_material_renders_base_color_times_lightmap(scene, tmp_path, norma
 
 def test_add_to_materials_warns_on_a_material_shared_with_others(scene, tmp_path):
     floor, other = plane(), plane("Other", location=(10, 0, 0))
-    mat = bpy.data.materials.new("Shared")
+    mat = new_material("Shared")
     floor.data.materials.append(mat)
     other.data.materials.append(mat)
     lightmaps.bake_lightmaps(scene, [floor], resolution=8, bounces=0, out_dir=str(tmp_path))
@@ -258,7 +268,7 @@ def test_add_to_materials_warns_on_a_material_shared_with_others(scene, tmp_path
 
 def test_add_to_materials_before_baking_names_the_object(scene):
     floor = plane()
-    floor.data.materials.append(bpy.data.materials.new("Paint"))
+    floor.data.materials.append(new_material("Paint"))
     before = len(bpy.data.materials["Paint"].node_tree.nodes)
     with pytest.raises(ValueError, match="Floor: no baked lightmap images"):
         lightmap_nodes.add_to_objects(scene, [floor], "lightmap")
@@ -289,7 +299,7 @@ def test_texel_density_sets_the_resolution_from_the_area(scene, tmp_path):
 # -- 4. albedo from the material -------------------------------------------------------------------
 
 def textured(obj, image):
-    mat = bpy.data.materials.new("Textured")
+    mat = new_material("Textured")
     obj.data.materials.append(mat)
     tree = mat.node_tree
     texture = tree.nodes.new("ShaderNodeTexImage")
@@ -300,7 +310,7 @@ def textured(obj, image):
 
 def test_albedo_from_base_color_value_and_texture(scene):
     floor = plane()
-    mat = bpy.data.materials.new("Value")
+    mat = new_material("Value")
     mat.node_tree.nodes["Principled BSDF"].inputs["Base Color"].default_value = (0.1, 0.2, 0.3, 1.0)
     floor.data.materials.append(mat)
     assert np.allclose(lightmap_albedo.base_color(floor, floor.data), (0.1, 0.2, 0.3))

@@ -129,6 +129,8 @@ def test_lightmap_node_group_combines_like_source(scene, tmp_path):
     floor = plane(size=2.0)
     mat = bpy.data.materials.new("Show")
     floor.data.materials.append(mat)
+    if mat.node_tree is None:  # Blender before 5.0
+        mat.use_nodes = True
     tree = mat.node_tree
     tree.nodes.clear()
     group = tree.nodes.new("ShaderNodeGroup")

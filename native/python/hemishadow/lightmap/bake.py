@@ -54,6 +54,12 @@ def _suns(suns):
     return out
 
 
+def blocked_cells(masks):
+    """Set bits per packed mask (P, 16) uint64. Not np.bitwise_count: Blender 4.2-4.4 bundle
+    numpy 1.26, which does not have it."""
+    return np.unpackbits(np.ascontiguousarray(masks).view(np.uint8), axis=1).sum(axis=1, dtype=np.int64)
+
+
 class Steps:
     """Progress over `total` steps, reported to `callback` (the engine's convention: a
     fraction; False cancels, raising Cancelled naming `what`)."""
@@ -273,7 +279,7 @@ def _valid(scene, points, ng, masks, offset):
     than half its disk's cells, so one with at most half its cells blocked is valid (the
     probes use it with masks they already have)."""
     valid = np.ones(len(points), bool)
-    maybe = np.bitwise_count(masks).sum(axis=1) > 0.45 * cells.directions().any(axis=1).sum()
+    maybe = blocked_cells(masks) > 0.45 * cells.directions().any(axis=1).sum()
     if maybe.any():
         valid[maybe] = scene.valid(points[maybe], ng[maybe], offset=offset)
     return valid
@@ -292,10 +298,10 @@ def _masks_and_valid(scene, points, ng, offset):
         s = slice(start, start + _MASK_CHUNK)
         if combined:
             masks[s], valid[s] = scene.visibility_valid(points[s], ng[s], offset=offset)
-            maybe = np.bitwise_count(masks[s]).sum(axis=1) > limit
+            maybe = blocked_cells(masks[s]) > limit
         else:
             masks[s] = scene.visibility(points[s], ng[s], offset=offset)
-            maybe = np.bitwise_count(masks[s]).sum(axis=1) > limit
+            maybe = blocked_cells(masks[s]) > limit
             if maybe.any():
                 valid[s][maybe] = scene.valid(points[s][maybe], ng[s][maybe], offset=offset)
         combined = maybe.mean() > 0.5
