@@ -121,6 +121,20 @@ def install_extension(zip_path, site):
 
 # -- the scene ---------------------------------------------------------------------------------
 
+def use_addon(source, zip_path, site):
+    """Registers this checkout's add-on with the environment's engine (`source`), or installs
+    the extension zip as a user would."""
+    if source:
+        sys.path.insert(0, str(ROOT))
+        import addon
+        import hemishadow
+
+        addon.register()
+        print(f"add-on from {ROOT / 'addon'} (not installed), engine from {pathlib.Path(hemishadow.__file__).parent}")
+    else:
+        install_extension(zip_path, site)
+
+
 def build_scene(grid: int, frames: int, hdri: str):
     import bpy
     from hemishadow.environment import builtin_hdris
@@ -301,15 +315,7 @@ def main(argv=None):
     import bpy
 
     module = "addon" if args.source else MODULE
-    if args.source:
-        sys.path.insert(0, str(ROOT))
-        import addon
-        import hemishadow
-
-        addon.register()
-        print(f"add-on from {ROOT / 'addon'} (not installed), engine from {pathlib.Path(hemishadow.__file__).parent}")
-    else:
-        install_extension(args.zip, site)
+    use_addon(args.source, args.zip, site)
     engine_bridge = sys.modules[module + ".engine_bridge"]
     bake = sys.modules[module + ".operators.bake"]
 

@@ -93,14 +93,7 @@ def main(argv=None):
     user, site = demo_blender.prepare_user_resources(args.user_resources)
     import bpy
 
-    if args.source:
-        sys.path.insert(0, str(ROOT))
-        import addon
-
-        addon.register()
-        print(f"add-on from {ROOT / 'addon'} (not installed)")
-    else:
-        demo_blender.install_extension(args.zip, site)
+    demo_blender.use_addon(args.source, args.zip, site)
     scene, _ = demo_lightmaps.build_scene(args.hdri)
     volume = add_volume(scene)
     bpy.context.view_layer.objects.active = volume

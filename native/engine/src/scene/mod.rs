@@ -367,22 +367,7 @@ impl Scene {
 
     /// Whether each receiver is outside solid geometry (see `receivers`).
     pub fn valid(&mut self, points: &[Vec3], normals: &[Vec3], offset: Option<f32>) -> Result<Vec<bool>> {
-        receivers::check(points, Some(normals))?;
-        let offset = receivers::offset(offset, self.size())?;
-        let table = PlaneTable::shared(self.table_resolution)?;
-        let (trees, positions) = self.walk_parts();
-        let walk = Walk { trees: &trees, positions: &positions, instances: &self.instances, top: self.top.as_ref().expect("prepared"), lod: self.lod, exclude: &[] };
-        let radiance: Vec<Option<&[Rgb]>> = vec![None; self.instances.len()];
-        Ok(points
-            .par_iter()
-            .zip(normals)
-            .map_init(Vec::new, |scratch, (p, n)| {
-                let receiver = receivers::receiver(*p, *n, offset);
-                let mut sink = DepthSink::new(&table, &radiance);
-                walk.run(&receiver, scratch, &mut sink);
-                receivers::is_valid(&sink.back)
-            })
-            .collect())
+        self.depth_buffers(points, normals, offset, |sink| receivers::is_valid(&sink.back))
     }
 
     /// Per segment from `points[i]` to `targets[i]`, whether any triangle of the scene crosses
@@ -408,13 +393,21 @@ impl Scene {
     /// buffer): the mask is the covered cells with pinholes closed as `visibility` closes them.
     /// Cheaper than both calls where most receivers need the validity (closed rooms).
     pub fn visibility_valid(&mut self, points: &[Vec3], normals: &[Vec3], offset: Option<f32>) -> Result<(Vec<Mask>, Vec<bool>)> {
+        let full = disk();
+        let both = self.depth_buffers(points, normals, offset, |sink| {
+            (pinholes::close(&sink.covered(), &full, traverse::PINHOLE_NEIGHBOURS), receivers::is_valid(&sink.back))
+        })?;
+        Ok(both.into_iter().unzip())
+    }
+
+    /// `read` of each receiver's depth buffer (the ordered mode without radiance).
+    fn depth_buffers<T: Send>(&mut self, points: &[Vec3], normals: &[Vec3], offset: Option<f32>, read: impl Fn(&DepthSink) -> T + Sync + Send) -> Result<Vec<T>> {
         receivers::check(points, Some(normals))?;
         let offset = receivers::offset(offset, self.size())?;
         let table = PlaneTable::shared(self.table_resolution)?;
         let (trees, positions) = self.walk_parts();
         let walk = Walk { trees: &trees, positions: &positions, instances: &self.instances, top: self.top.as_ref().expect("prepared"), lod: self.lod, exclude: &[] };
         let radiance: Vec<Option<&[Rgb]>> = vec![None; self.instances.len()];
-        let full = disk();
         Ok(points
             .par_iter()
             .zip(normals)
@@ -422,9 +415,9 @@ impl Scene {
                 let receiver = receivers::receiver(*p, *n, offset);
                 let mut sink = DepthSink::new(&table, &radiance);
                 walk.run(&receiver, scratch, &mut sink);
-                (pinholes::close(&sink.covered(), &full, traverse::PINHOLE_NEIGHBOURS), receivers::is_valid(&sink.back))
+                read(&sink)
             })
-            .unzip())
+            .collect())
     }
 
     /// Ordered mode: the SH projection (bands^2 x 3 per point, coefficient-major) of the
