@@ -24,13 +24,13 @@ _LAMP_CHUNK = 8192
 _MASK_CHUNK = 8192
 
 
-def _positive_int(value, what, minimum=1):
+def positive_int(value, what, minimum=1):
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
         raise ValueError(f"{what} must be an integer >= {minimum}, got {value!r}")
     return int(value)
 
 
-def _lighting(lighting):
+def checked_lighting(lighting):
     if lighting is None:
         return None
     array = geometry.finite(lighting, "lighting", (-1, 3))
@@ -39,7 +39,7 @@ def _lighting(lighting):
     return array.astype(np.float32)
 
 
-def _suns(suns):
+def checked_suns(suns):
     out = []
     for i, sun in enumerate(suns):
         d = geometry.finite(sun.direction, f"sun {i}: direction", (3,))
@@ -73,7 +73,7 @@ class Steps:
             raise Cancelled(f"{self.what} cancelled")
 
 
-def _direct(scene, points, ng, lobes, lighting, suns, index, offsets, want_sh, offset, progress, masks=None,
+def direct_light(scene, points, ng, lobes, lighting, suns, index, offsets, want_sh, offset, progress, masks=None,
             exact_suns=True, texel_grid=None, lamps=(), lamp_points=16):
     """Direct light (P, L, 3), ao (P,), L1 SH (P, 4, 3) or None, for samples; `masks` (P, 16)
     are their raw visibility masks when already known (unpacked a chunk at a time: 1 KiB a
@@ -193,14 +193,14 @@ def bake(scene, targets, *, resolution, lighting=None, suns=(), lamps=(), surfac
         `hemishadow.Cancelled` and nothing is returned.
     """
     targets, sizes = _targets_and_sizes(targets, resolution)
-    samples = _positive_int(samples, "samples")
-    margin = _positive_int(margin, "margin", 0)
-    bounces = _positive_int(bounces, "bounces", 0)
+    samples = positive_int(samples, "samples")
+    margin = positive_int(margin, "margin", 0)
+    bounces = positive_int(bounces, "bounces", 0)
     if basis not in BASES:
         raise ValueError(f"basis must be one of {BASES}, got {basis!r}")
-    lighting, suns = _lighting(lighting), _suns(suns)
+    lighting, suns = checked_lighting(lighting), checked_suns(suns)
     lamps = [lamp_models.check(lamp, i) for i, lamp in enumerate(lamps)]
-    lamp_points = _positive_int(lamp_points, "lamp_points")
+    lamp_points = positive_int(lamp_points, "lamp_points")
     direct_suns = [s for s in suns if not s.indirect_only]
     direct_lamps = [lamp for lamp in lamps if not lamp.indirect_only]
     want_sh = basis == "sh"
@@ -213,7 +213,7 @@ def bake(scene, targets, *, resolution, lighting=None, suns=(), lamps=(), surfac
     index = np.concatenate([g[0].index for g in geo])
     lobes = n[:, None] if basis != "hl2" else np.concatenate([n[:, None], frames.hl2_world(t, b, n)], axis=1)
 
-    receivers = _bounce_receivers(targets, surfaces) if (bounces or _emits(targets, surfaces)) else []
+    receivers = bounce_receivers(targets, surfaces) if (bounces or emitters(targets, surfaces)) else []
     vertex_count = sum(len(r[1]) for r in receivers)
     steps = Steps(progress, len(points) + vertex_count * (1 + bounces) + len(points) * bool(receivers))
     usable = np.linalg.norm(ng, axis=1) > 0.5  # zero-area triangles have no normal
@@ -224,7 +224,7 @@ def bake(scene, targets, *, resolution, lighting=None, suns=(), lamps=(), surfac
     texel_id = np.concatenate([(k * r + g[0].texel // sz) * r + g[0].texel % sz
                                for k, (g, sz) in enumerate(zip(geo, sizes))])  # (target, row, col) in a T x r x r grid
     grid = (texel_id, (len(geo), r, r)) if adaptive_suns else None
-    maps, ao, sh = _direct(scene, points, ng, lobes, lighting, direct_suns, index, offs, want_sh, offset, steps, masks,
+    maps, ao, sh = direct_light(scene, points, ng, lobes, lighting, direct_suns, index, offs, want_sh, offset, steps, masks,
                            texel_grid=grid, lamps=direct_lamps, lamp_points=lamp_points)
     if receivers:
         gathered = _indirect(scene, receivers, points, ng, valid, texel_id, lighting, suns, lamps, offs, bounces,
@@ -251,8 +251,8 @@ def _targets_and_sizes(targets, resolution):
     if isinstance(resolution, (list, tuple, np.ndarray)):
         if len(resolution) != len(targets):
             raise ValueError(f"{len(resolution)} resolutions for {len(targets)} targets")
-        return targets, [_positive_int(r, "resolution") for r in resolution]
-    return targets, [_positive_int(resolution, "resolution")] * len(targets)
+        return targets, [positive_int(r, "resolution") for r in resolution]
+    return targets, [positive_int(resolution, "resolution")] * len(targets)
 
 
 def _indirect(scene, receivers, points, ng, valid, texel_id, lighting, suns, lamps, offsets, bounces, offset, steps):
@@ -263,7 +263,7 @@ def _indirect(scene, receivers, points, ng, valid, texel_id, lighting, suns, lam
         d = np.zeros((len(pts), 3), np.float32)
         if ok.any():
             # bounce light is soft: the proxies' sun shadows do (lod 0 costs 4x and more)
-            d[ok] = _direct(scene, pts[ok], nrm[ok], nrm[ok][:, None], lighting, suns, np.zeros(ok.sum(), np.int64),
+            d[ok] = direct_light(scene, pts[ok], nrm[ok], nrm[ok][:, None], lighting, suns, np.zeros(ok.sum(), np.int64),
                             offsets, False, offset, steps, exact_suns=False, lamps=lamps, lamp_points=1)[0][:, 0]
         direct.append(d)
     radiance = bounce.vertex_radiance(scene, receivers, direct, bounces, offset)
@@ -274,7 +274,7 @@ def _indirect(scene, receivers, points, ng, valid, texel_id, lighting, suns, lam
     return scene.gather(points[rep], ng[rep], bands=bounce.BANDS, offset=offset)[of_sample]
 
 
-def _valid(scene, points, ng, masks, offset):
+def hemisphere_valid(scene, points, ng, masks, offset):
     """`Scene.valid` where it can be False: a receiver is invalid when back faces cover more
     than half its disk's cells, so one with at most half its cells blocked is valid (the
     probes use it with masks they already have)."""
@@ -336,11 +336,11 @@ def _finish(tx, resolution, values, valid, tris, uv, names, margin, stitch_seams
     return out
 
 
-def _emits(targets, surfaces):
+def emitters(targets, surfaces):
     return any(np.any(np.asarray(s.emission) != 0) for s in list(surfaces) + [t.surface for t in targets])
 
 
-def _bounce_receivers(targets, surfaces):
+def bounce_receivers(targets, surfaces):
     """(mesh_id, points, normals, usable, albedo, emission) per distinct mesh."""
     seen, out = set(), []
     for surface in list(surfaces) + [t.surface for t in targets]:

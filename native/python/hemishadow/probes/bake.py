@@ -9,7 +9,7 @@ convention of `hemishadow.project_environment`, not divided by pi), `valid` (P,)
 
 import numpy as np
 
-from ..lightmap.bake import Steps, _bounce_receivers, _direct, _emits, _lighting, _positive_int, _suns
+from ..lightmap.bake import Steps, bounce_receivers, direct_light, emitters, checked_lighting, positive_int, checked_suns
 from ..lightmap import bounce, cells, texels
 from . import capture, grid, validity
 from .cube import sh_to_cube
@@ -53,11 +53,11 @@ def bake(scene, points, *, lighting=None, suns=(), surfaces=(), bounces=2, cell=
     pts = _points(points)
     if scene.triangle_count == 0:
         raise ValueError("the scene has no geometry: add the meshes that block light before baking probes")
-    bounces = _positive_int(bounces, "bounces", 0)
-    lighting, suns, cell = _lighting(lighting), _suns(suns), _cell(cell)
+    bounces = positive_int(bounces, "bounces", 0)
+    lighting, suns, cell = checked_lighting(lighting), checked_suns(suns), _cell(cell)
     surfaces = list(surfaces)
-    emits = _emits([], surfaces)
-    receivers = _bounce_receivers([], surfaces) if surfaces and (bounces or emits) else []
+    emits = emitters([], surfaces)
+    receivers = bounce_receivers([], surfaces) if surfaces and (bounces or emits) else []
     steps = Steps(progress, 3 * len(pts) + sum(len(r[1]) for r in receivers) * (1 + bounces), "probe bake")
 
     masks = capture.masks(scene, pts, offset)
@@ -109,7 +109,7 @@ def _bounce(scene, receivers, points, lighting, suns, bounces, offset, steps):
     for mesh_id, pts, nrm, ok, _, _ in receivers:
         d = np.zeros((len(pts), 3), np.float32)
         if ok.any() and bounces:  # with no pass, surfaces show their emission only
-            d[ok] = _direct(scene, pts[ok], nrm[ok], nrm[ok][:, None], lighting, suns,
+            d[ok] = direct_light(scene, pts[ok], nrm[ok], nrm[ok][:, None], lighting, suns,
                                           np.zeros(ok.sum(), np.int64), texels.offsets(1), False, offset, steps,
                                           exact_suns=False)[0][:, 0]
         direct.append(d)

@@ -11,7 +11,7 @@ import itertools
 
 import numpy as np
 
-from ..lightmap.bake import _valid as hemisphere_valid
+from ..lightmap.bake import hemisphere_valid
 from . import capture
 from .cube import AXES
 
