@@ -117,3 +117,33 @@ def sun(scene, points, sun_lamp, offset=None):
     y = sh_basis(d[:1].astype(np.float32), 3).astype(np.float64)[0]
     sh9 = lit[:, None, None] * y[None, :, None] * rgb  # a delta of irradiance `strength`
     return cube, sh9
+
+
+#: The axis of the two hemispheres that take a lamp's light. Together they see every direction
+#: once, and no lamp lies in their dividing plane by accident (one level with a probe would lie
+#: in the plane of +Z and -Z, counted by neither).
+LAMP_AXIS = np.array([0.267261, 0.534522, 0.801784])
+_LAMP_CHUNK = 4096
+
+
+def lamp(scene, points, lamp_model, lamp_points=16, offset=None):
+    """Cube (P, 6, 3) and SH9 (P, 9, 3) of a point, spot or area lamp (`lightmap.lamps`,
+    checked): the lightmap baker's `lamp_light` (exact segment shadows, `lamp_points` points
+    on a lamp with a size) on the two hemispheres of LAMP_AXIS, with the six axes as lobes."""
+    from ..lightmap import lamps as lamp_models
+    from ..lightmap import texels
+
+    p = len(points)
+    cube, sh9 = np.zeros((p, 6, 3)), np.zeros((p, 9, 3))
+    offsets = texels.offsets(1)  # the lamp's points at the centres of their strata
+    for s in range(0, p, _LAMP_CHUNK):
+        pts = points[s:s + _LAMP_CHUNK]
+        lobes = np.broadcast_to(AXES, (len(pts), 6, 3))
+        index = np.zeros(len(pts), np.int64)
+        for sign in (1.0, -1.0):
+            ng = np.broadcast_to(sign * LAMP_AXIS, pts.shape)
+            m, h = lamp_models.lamp_light(scene, lamp_model, pts, ng, lobes, index, offsets, lamp_points, offset,
+                                          want_sh=True, sh_bands=3)
+            cube[s:s + _LAMP_CHUNK] += m
+            sh9[s:s + _LAMP_CHUNK] += np.pi * h  # lamp_light's SH is divided by pi, the probes' is not
+    return cube, sh9
