@@ -113,3 +113,18 @@ def test_a_new_probe_bake_reshades_cached_objects_at_once(yard, addon):
     expected = probe_shaded(addon, scene, ball, addon.cache.load(ball).transfer[0])
     np.testing.assert_allclose(after, expected, rtol=1e-4, atol=1e-6)
     assert after.max() > 1.5 * before.max()
+
+
+def test_the_probe_preview_reshades_with_the_stored_probes(yard, addon):
+    """Stored probes changed behind the add-on's back (as an undo brings older ones back):
+    showing the preview re-shades the objects with what it shows."""
+    scene, ball, volume = yard, yard.objects["Ball"], yard.objects["Volume"]
+    scene.hemishadow.live = True
+    scene.frame_set(1)
+    before = attribute(ball, addon.mesh_io.RADIANCE).copy()
+    data = addon.probes.stored(volume)
+    data["cube"], data["sh9"] = 2 * data["cube"], 2 * data["sh9"]
+    addon.probes.store_on(volume, data)
+    bpy.context.view_layer.objects.active = volume
+    assert bpy.ops.hemishadow.probe_preview() == {"FINISHED"}
+    np.testing.assert_allclose(attribute(ball, addon.mesh_io.RADIANCE), 2 * before, rtol=1e-4, atol=1e-6)

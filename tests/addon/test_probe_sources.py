@@ -41,7 +41,8 @@ def test_point_spot_and_area_lamps_light_the_probes(addon):
 
     def delta(intensity, lamp, p):
         to = np.asarray(lamp) - p
-        return np.outer(np.maximum(hemishadow.probes.AXES @ (to / np.linalg.norm(to)), 0), intensity) / (to @ to) / math.pi
+        cosines = np.maximum(hemishadow.probes.AXES @ (to / np.linalg.norm(to)), 0)
+        return np.outer(cosines, intensity) / (to @ to) / math.pi
 
     def area_light(p):  # a small Lambertian emitter: P / pi W/sr along its normal (+X), times the cosine
         to = p - np.array([-3.0, 0.0, 1.0])
@@ -89,9 +90,9 @@ def test_bounce_from_baked_lightmaps_matches_the_computed_bounce(addon):
     """The same bounce light both ways: computed at the vertices, and read from the floor's
     and wall's lightmaps (baked direct only, 32 texels) at their vertices; worst side within
     5 % of the probe's brightest bounce side (3.3 % measured: texels against vertex samples
-    where the wall's shadow edge crosses the floor). The lightmap path is the one taken: the notes say so,
-    doubling the lightmaps doubles the bounce, and with the floor's lightmap gone and the
-    wall's black, the floor is computed again and the wall sends nothing."""
+    where the wall's shadow edge crosses the floor). The lightmap path is the one taken: the
+    notes say so, doubling the lightmaps doubles the bounce, and with the floor's lightmap
+    gone and the wall's black, the floor is computed again and the wall sends nothing."""
     scene, floor, wall = lit_wall(addon)
     computed, plain = bounce_of(addon, scene)
     assert plain["lightmapped"] == [] and computed.max() > 0.05

@@ -41,15 +41,16 @@ def _cell(cell):
 
 
 def bake(scene, points, *, lighting=None, suns=(), lamps=(), surfaces=(), bounces=2, cell=None, offset=None,
-         lamp_points=16, lightmaps=None, progress=None):
+         lamp_points=220, lightmaps=None, progress=None):
     """Bakes probes at `points` (P, 3) in `scene` (a `hemishadow.Scene` of every blocker).
 
     lighting: environment radiance SH (K, 3), K = 1, 4, 9, 16, 25 (None: none).
     suns: `hemishadow.lightmap.Sun`s (strength = irradiance in W/m^2 facing the sun).
     lamps: `Point`, `Spot` and `Area` lamps (`hemishadow.lightmap`; DESIGN.md's power
         conventions), lit and shadowed as the lightmap baker does (`capture.lamp`); suns and
-        lamps with `indirect_only` light the bounce surfaces only. lamp_points: points on a
-        lamp with a size (soft shadows), as the lightmap baker's.
+        lamps with `indirect_only` light the bounce surfaces only. lamp_points: about this
+        many points on a lamp with a size (soft shadows; a Fibonacci lattice,
+        `capture.lamp_shifts`).
     surfaces: `hemishadow.lightmap.Surface`s that reflect (albedo) or emit light; bounce
         receivers at their vertices, as in the lightmap baker. bounces: 0 = direct light only.
     lightmaps: {mesh_id: (V, 3)} the irradiance / pi at a surface's vertices from its baked
