@@ -294,7 +294,7 @@ def _why_invalid(obj, scene, frame: int, cache: BakeCache | None, depsgraph=None
     volume = probe_lighting.volume_of(obj)
     if volume is not None and cache.transfer is None:
         return "Probe Lighting shades the cache's transfer vectors and this cache holds none: bake it again"
-    if volume is not None and probes.stored(volume) is None:
+    if volume is not None and probes.PROP + "positions" not in volume:  # (probes.stored, without reading it)
         return f"its probe volume '{volume.name}' holds no baked probes"
     if cache.transfer is None and not _same_shading(cache, obj, scene):
         return "the lighting or albedo changed and the cache holds no transfer vectors to re-shade"

@@ -4,8 +4,9 @@ whose object has a hemishadow lightmap shows the probes the radiance that lightm
 
 A lightmap is found as the lightmap bake leaves it (lightmaps.py): the Blender image
 `hemishadow_<object>_flat` (what the scene shows), else the file `<folder>/<object>.exr`
-(its `flat` layer); it is read through the lightmap UV map of the scene's Lightmaps settings
-(default `lightmap`). Objects without one, or without that UV map, are computed as before.
+(its `flat` layer; the folder of the scene's Lightmaps settings, default `//lightmaps`); it
+is read through the UV map those settings name (default `lightmap`). Objects without one,
+or without that UV map, are computed as before.
 """
 
 import os
@@ -16,12 +17,15 @@ import numpy as np
 from . import lightmaps
 
 
+def _settings(scene, name, default):
+    return getattr(getattr(scene, "hemishadow_lightmaps", None), name, "") or default
+
+
 def uv_name(scene):
-    settings = getattr(scene, "hemishadow_lightmaps", None)
-    return getattr(settings, "uv_name", "") or lightmaps.DEFAULT_UV
+    return _settings(scene, "uv_name", lightmaps.DEFAULT_UV)
 
 
-def flat_map(obj):
+def flat_map(obj, scene):
     """The object's baked `flat` map (R, R', 3), rows top to bottom, or None."""
     image = bpy.data.images.get(f"{lightmaps.IMAGE_PREFIX}{obj.name}_flat")
     if image is not None and image.size[0] > 0 and image.size[1] > 0:
@@ -29,7 +33,7 @@ def flat_map(obj):
         pixels = np.empty(w * h * 4, np.float32)
         image.pixels.foreach_get(pixels)
         return pixels.reshape(h, w, 4)[::-1, :, :3]  # Blender's rows start at the bottom
-    folder = lightmaps.output_folder()
+    folder = lightmaps.output_folder(_settings(scene, "directory", None))
     path = os.path.join(folder, f"{lightmaps._safe(obj.name)}.exr") if folder else None
     if path and os.path.isfile(path):
         import hemishadow.lightmap as lm
@@ -47,7 +51,7 @@ def vertex_light(scene, surfaces, depsgraph=None):
     name, out = uv_name(scene), {}
     for surface in surfaces:
         obj = scene.objects.get(surface.name)
-        flat = None if obj is None or name not in obj.data.uv_layers else flat_map(obj)
+        flat = None if obj is None or name not in obj.data.uv_layers else flat_map(obj, scene)
         if flat is None:
             continue
         data = lightmaps.read_mesh(obj, depsgraph, name)

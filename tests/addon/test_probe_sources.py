@@ -119,6 +119,21 @@ def test_bounce_from_baked_lightmaps_matches_the_computed_bounce(addon):
     assert (mixed[:, 5] > 0.4 * computed[:, 5]).all()  # the floor still lit (0.52 to 0.91)
 
 
+def test_lightmaps_written_to_files_only_are_read_from_their_exr(addon, tmp_path):
+    """Lightmaps baked without Blender images (files only, into the Lightmaps settings'
+    folder): the probes read the EXR files' `flat` layers, the same bounce as computed."""
+    scene, floor, wall = lit_wall(addon)
+    computed, _ = bounce_of(addon, scene)
+    scene.hemishadow_lightmaps.directory = str(tmp_path)
+    addon.lightmaps.bake_lightmaps(scene, [floor, wall], resolution=32, bounces=0, out_dir=str(tmp_path),
+                                   images=False)
+    assert not [i for i in bpy.data.images if i.name.startswith("hemishadow_")]
+    from_files, lit = bounce_of(addon, scene)
+    assert len(lit["lightmapped"]) == 2
+    err = np.abs(from_files - computed).max(axis=(1, 2)) / computed.max(axis=(1, 2))
+    assert err.max() < 0.05, err
+
+
 def scale_image(name, factor):
     image = bpy.data.images[name]
     pixels = np.empty(len(image.pixels), np.float32)
