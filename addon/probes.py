@@ -6,8 +6,9 @@ except objects with hemishadow enabled: they are live-shaded (characters, props 
 and take their light from the grid instead of being baked into it. Light: the World's SH,
 sun, point, spot and area lamps as the lightmap bake reads them (`lightmaps.lighting_of`,
 `suns_of`, `lamps_of`); albedo and emission from the Principled BSDF's input values; the
-bounce light of surfaces with baked lightmaps from those (probe_lightmaps.py). Results go to an .npz file (plus .json
-beside it) and onto the volume object (custom properties `hemishadow_probe_*`).
+bounce light of surfaces with baked lightmaps from those (probe_lightmaps.py). Results go
+to an .npz file (plus .json beside it) and onto the volume object (custom properties
+`hemishadow_probe_*`); the objects the volume lights are re-shaded at once.
 """
 
 from __future__ import annotations
