@@ -3,10 +3,11 @@ equirectangular panorama sees first, read from Cycles' data passes.
 
 One Cycles render, 1 sample, pixel filter 0.01 px (no mixing across edges), of a panoramic
 equirectangular camera: Position, Normal (shading), Diffuse Color (the Principled BSDF's Base
-Color when metallic and transmission are 0) and Object Index passes; the geometric normal is
+Color when metallic, transmission and the specular layer are 0: the specular layer is switched
+off for the render) and Object Index passes; the geometric normal is
 the normal of the first triangle on each pixel's ray (a BVH of the same world triangles as the
-engine's scene: about 2 s per 100 000 pixels, in Python's loop). A temporary camera (and temporary render settings, pass indices and
-visibility of non-mesh geometry) is used and everything is put back afterwards, also on error.
+engine's scene: about 2 s per 100 000 pixels, in Python's loop). A temporary camera (and temporary render settings, pass indices, specular levels
+and visibility of non-mesh geometry) is used and everything is put back afterwards, also on error.
 
 The viewpoint's frame follows docs/panoramas.md: with `--at` (identity) the centre column looks
 along +X, the left quarter along +Y, the top row along +Z, which is a panoramic camera rotated
@@ -161,13 +162,31 @@ def render_passes(scene, origin, rotation, size, meshes):
     hidden non-mesh geometry and the camera are put back, the temporary file removed."""
     layer = _view_layer(scene)
     hidden = [(o, "hide_render", True) for o in scene.objects if o.type in _GEOMETRY and not o.hide_render]
-    indices = [(o, "pass_index", i + 1) for i, o in enumerate(meshes)]
+    indices = [(o, "pass_index", i + 1) for i, o in enumerate(meshes)] + _no_specular(meshes)
     with tempfile.TemporaryDirectory(prefix="hemishadow_panorama_") as folder:
         path = os.path.join(folder, "passes.exr")
         with temporary_camera(scene, origin, rotation) as camera, \
                 overrides(render_settings(scene, camera, layer, size, path) + hidden + indices):
             bpy.ops.render.render(write_still=True, scene=scene.name, layer=layer.name)
         return read_passes(path, layer.name)
+
+
+def _no_specular(meshes):
+    """Specular IOR Level 0 on the meshes' Principled BSDFs while the passes render: Cycles'
+    Diffuse Color is the Base Color less what the dielectric layer reflects (angle-dependent),
+    without it the Base Color itself."""
+    out, seen = [], set()
+    for obj in meshes:
+        for slot in obj.material_slots:
+            mat = slot.material
+            if mat is None or mat.node_tree is None or mat.name in seen:
+                continue
+            seen.add(mat.name)
+            for node in mat.node_tree.nodes:
+                socket = node.inputs.get("Specular IOR Level") if node.type == "BSDF_PRINCIPLED" else None
+                if socket is not None and not socket.is_linked and socket.default_value != 0:
+                    out.append((socket, "default_value", 0.0))
+    return out
 
 
 def geometric_normals(world, origin, points):
@@ -192,7 +211,8 @@ def geometric_normals(world, origin, points):
 def hits(scene, origin, rotation, size=(1024, 512), depsgraph=None):
     """(hemishadow.panorama.Hits, engine scene, surfaces) of the panorama at `origin` with
     frame `rotation`: Cycles' passes for the pixels, the engine scene of the same meshes (mesh
-    id i = surfaces[i] = object id i). Normals face the viewpoint. Raises ValueError for an
+    id i = surfaces[i] = object id i). The shading normal faces the viewpoint, the geometric
+    one is the triangle's modelled front (as in `primary_hits`). Raises ValueError for an
     empty scene or a viewpoint inside a mesh (naming it)."""
     from hemishadow.panorama import Hits
 
@@ -210,7 +230,7 @@ def hits(scene, origin, rotation, size=(1024, 512), depsgraph=None):
     towards = np.asarray(origin, np.float64) - position[mask]
     back = (winding * towards).sum(axis=1) < 0
     _check_inside(origin, back, object_id[mask], surfaces)
-    ng[mask] = np.where(back[:, None], -winding, winding)
+    ng[mask] = winding  # the triangle's modelled front, as the engine's primary_hits gives it
     shading[mask] *= np.where((shading[mask] * towards).sum(axis=1) < 0, -1.0, 1.0)[:, None]
     albedo = np.where(mask[..., None], passes["DiffCol"], 0).astype(np.float32)
     return (Hits(position, _unit(ng), _unit(shading), albedo, object_id, mask), engine_scene, surfaces)
