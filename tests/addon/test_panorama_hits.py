@@ -111,7 +111,7 @@ def test_nothing_is_left_behind(boxes, panorama_hits):
     before = (scene.render.engine, scene.render.resolution_x, scene.render.resolution_y,
               scene.render.image_settings.file_format, scene.camera, scene.cycles.samples,
               scene.cycles.filter_width, scene.view_layers[0].use_pass_position, len(bpy.data.objects),
-              len(bpy.data.cameras), [o.pass_index for o in scene.objects])
+              len(bpy.data.cameras), [o.pass_index for o in scene.objects], _specular())
     panorama_hits.hits(scene, np.array([0.0, 0.0, 1.0]), np.eye(3), SIZE)
     after = (scene.render.engine, scene.render.resolution_x, scene.render.resolution_y,
              scene.render.image_settings.file_format, scene.camera, scene.cycles.samples,
