@@ -106,6 +106,10 @@ def test_a_camera_gives_its_own_frame(boxes, panorama_hits):
     assert surfaces[hits.object_id[SIZE[1] // 2, SIZE[0] // 2]].name == "AlongY"
 
 
+def _specular():
+    return [m.node_tree.nodes["Principled BSDF"].inputs["Specular IOR Level"].default_value for m in bpy.data.materials]
+
+
 def test_nothing_is_left_behind(boxes, panorama_hits):
     scene = boxes
     before = (scene.render.engine, scene.render.resolution_x, scene.render.resolution_y,
