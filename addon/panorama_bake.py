@@ -13,8 +13,10 @@ compact form (FILE/panorama.json with its 8-bit maps) beside it; a failure leave
 from __future__ import annotations
 
 import dataclasses
+import importlib
 import os
 import shutil
+import tempfile
 
 import bpy
 import numpy as np
@@ -66,13 +68,16 @@ def check_writable(path):
         raise ValueError(f"{path}: the panorama is written as an .exr file (and its compact form beside it)")
     folder = os.path.dirname(os.path.abspath(path)) or "."
     existing = folder
-    while not os.path.isdir(existing):
-        parent = os.path.dirname(existing)
-        if parent == existing:
-            break
-        existing = parent
-    if not os.access(existing, os.W_OK | os.X_OK):
-        raise ValueError(f"cannot write the panorama to {folder}: {existing} is not writable")
+    while not os.path.exists(existing) and os.path.dirname(existing) != existing:
+        existing = os.path.dirname(existing)
+    if not os.path.isdir(existing):
+        raise ValueError(f"cannot write the panorama to {folder}: {existing} is a file, not a folder")
+    try:  # a real file, not os.access: root passes every access check
+        with tempfile.TemporaryFile(dir=existing):
+            pass
+    except OSError as error:
+        raise ValueError(f"cannot write the panorama to {folder}: {existing} is not writable "
+                         f"({error.strerror or error})") from None
 
 
 def prepare(scene, *, camera=None, at=None, size=(1024, 512), coefficients=16, bounces=0, depsgraph=None):
@@ -96,8 +101,9 @@ def bounce_light(prepared, progress=None):
     """(H, W, 3) outgoing radiance of bounced light at the pixels' surfaces under the scene's
     own lighting: the lightmap baker's vertex passes (`bounces` of them), gathered once per
     pixel over its geometric hemisphere, times the pixel's albedo."""
-    import hemishadow.lightmap.bake as lb
     from hemishadow.lightmap import bounce, lamps, texels
+
+    lb = importlib.import_module("hemishadow.lightmap.bake")  # the module: the package exports its `bake`
 
     scene, h = prepared.engine_scene, prepared.hits
     receivers = lb.bounce_receivers([], prepared.surfaces)
