@@ -30,7 +30,8 @@ from . import probes
 # A panoramic camera with this rotation gives the identity frame (`--at`).
 CAMERA_FRAME = ((0.0, 0.0, -1.0), (-1.0, 0.0, 0.0), (0.0, 1.0, 0.0))  # Euler (90, 0, -90) degrees, as a matrix
 _GEOMETRY = {"CURVE", "SURFACE", "META", "FONT", "CURVES", "POINTCLOUD", "VOLUME", "GREASEPENCIL", "GPENCIL"}
-BACK_FACE_LIMIT = 0.5  # more back faces than this among the hits: the viewpoint is inside a mesh
+BACK_FACE_LIMIT = 0.5
+DEFAULT_ALBEDO = 0.8  # meshes without a material: Blender's default grey  # more back faces than this among the hits: the viewpoint is inside a mesh
 
 
 def viewpoint(scene, camera=None, at=None):
@@ -233,6 +234,9 @@ def hits(scene, origin, rotation, size=(1024, 512), depsgraph=None):
     ng[mask] = winding  # the triangle's modelled front, as the engine's primary_hits gives it
     shading[mask] *= np.where((shading[mask] * towards).sum(axis=1) < 0, -1.0, 1.0)[:, None]
     albedo = np.where(mask[..., None], passes["DiffCol"], 0).astype(np.float32)
+    for i, obj in enumerate(meshes):
+        if not any(slot.material for slot in obj.material_slots):
+            albedo[object_id == i] = DEFAULT_ALBEDO  # Cycles' default surface has a specular layer in 5.x
     return (Hits(position, _unit(ng), _unit(shading), albedo, object_id, mask), engine_scene, surfaces)
 
 

@@ -37,7 +37,8 @@ PRIMARY = "5.3"
 TIER2_TESTS = ["tests/addon/test_package.py", "tests/addon/test_live.py", "tests/addon/test_world.py",
                "tests/addon/test_bake.py", "tests/addon/test_cli.py", "tests/addon/test_casters.py",
                "tests/addon/test_lightmaps.py", "tests/addon/test_lightmap_ui.py", "tests/addon/test_bake_probes.py",
-               "tests/addon/test_probe_lighting.py"]
+               "tests/addon/test_probe_lighting.py", "tests/addon/test_panorama_hits.py", "tests/addon/test_panorama.py",
+               "tests/addon/test_panorama_cycles.py"]
 
 
 def tier2_versions() -> list[str]:
