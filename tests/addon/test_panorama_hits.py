@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 bpy = pytest.importorskip("bpy")
-hp = pytest.importorskip("hemishadow.panorama")
+import hemishadow.panorama as hp  # noqa: E402
 
 SIZE = (96, 48)
 
