@@ -5,8 +5,9 @@ One Cycles render, 1 sample, pixel filter 0.01 px (no mixing across edges), of a
 equirectangular camera: Position, Normal (shading), Diffuse Color (the Principled BSDF's Base
 Color when metallic, transmission and the specular layer are 0: the specular layer is switched
 off for the render) and Object Index passes; the geometric normal is
-the normal of the first triangle on each pixel's ray (a BVH of the same world triangles as the
-engine's scene: about 2 s per 100 000 pixels, in Python's loop). A temporary camera (and temporary render settings, pass indices, specular levels
+the normal of the first triangle on each pixel's ray: the engine's own ray cast where it sees
+the same object as Cycles, Blender's BVH (a Python loop, about 2 s per 100 000 pixels) for the
+few pixels on silhouettes where they differ. A temporary camera (and temporary render settings, pass indices, specular levels
 and visibility of non-mesh geometry) is used and everything is put back afterwards, also on error.
 
 The viewpoint's frame follows docs/panoramas.md: with `--at` (identity) the centre column looks
@@ -227,7 +228,7 @@ def hits(scene, origin, rotation, size=(1024, 512), depsgraph=None):
     position = np.where(mask[..., None], passes["Position"], 0).astype(np.float32)
     shading = np.where(mask[..., None], passes["Normal"], 0)
     ng = np.zeros_like(shading)
-    winding = geometric_normals(world, origin, position[mask].astype(np.float64))
+    winding = _winding(engine_scene, world, origin, rotation, size, position, object_id)[mask]
     towards = np.asarray(origin, np.float64) - position[mask]
     back = (winding * towards).sum(axis=1) < 0
     _check_inside(origin, back, object_id[mask], surfaces)
@@ -238,6 +239,26 @@ def hits(scene, origin, rotation, size=(1024, 512), depsgraph=None):
         if not any(slot.material for slot in obj.material_slots):
             albedo[object_id == i] = DEFAULT_ALBEDO  # Cycles' default surface has a specular layer in 5.x
     return (Hits(position, _unit(ng), _unit(shading), albedo, object_id, mask), engine_scene, surfaces)
+
+
+def _winding(engine_scene, world, origin, rotation, size, position, object_id):
+    """(H, W, 3) winding normals: the engine's own primary hits where they see the same object
+    (a native ray cast, the same triangle but on silhouettes), Blender's BVH for the rest
+    (edges, and every pixel when the engine finds the viewpoint inside geometry: then
+    `_check_inside` names the mesh)."""
+    from hemishadow.panorama import primary_hits
+
+    out = np.zeros(position.shape, np.float64)
+    same = np.zeros(object_id.shape, bool)
+    try:
+        ref = primary_hits(engine_scene, origin, size=size, rotation=rotation)
+        same = ref.mask & (ref.object_id == object_id)
+        out[same] = ref.geometric_normal[same]
+    except ValueError:
+        pass
+    rest = (object_id >= 0) & ~same
+    out[rest] = geometric_normals(world, origin, position[rest].astype(np.float64))
+    return out
 
 
 def _unit(v):

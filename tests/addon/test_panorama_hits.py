@@ -78,6 +78,12 @@ def test_cycles_hits_match_the_engine_away_from_edges(boxes, panorama_hits):
     assert np.abs(hits.position[on] - ref.position[on]).max(axis=1).max() < 1e-3 * depth.max()
     assert (hits.shading_normal[on] * ref.shading_normal[on]).sum(axis=1).min() > 0.9999
     assert (hits.geometric_normal[on] * ref.geometric_normal[on]).sum(axis=1).min() > 0.9999
+    # Blender's BVH, which gives the geometric normal where the engine's ray sees another object
+    from addon import probes
+
+    world = probes.scene_geometry(boxes, live=True)[2]
+    bvh = panorama_hits.geometric_normals(world, origin, hits.position[on].astype(np.float64))
+    assert (bvh * ref.geometric_normal[on]).sum(axis=1).min() > 0.9999
     # Diffuse Color gives the Principled BSDF's Base Color (metallic 0, no transmission)
     for i, name in enumerate(names):
         base = np.array(bpy.data.materials[name].node_tree.nodes["Principled BSDF"].inputs["Base Color"]
