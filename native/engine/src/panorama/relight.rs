@@ -15,7 +15,6 @@ use super::directions::{self, Rotation};
 use super::half;
 use super::sh_lanes::{self, Lanes, LANES};
 use crate::error::{Error, Result};
-use crate::sh::ShBasis;
 
 pub enum Maps {
     U8(Vec<u8>),
@@ -127,12 +126,11 @@ impl Relighter {
         }
         let folded = self.fold(lighting);
         let simd = simd && Self::simd_available();
-        let basis = ShBasis::new((k as f64).sqrt() as usize)?;
         let (cols, rows) = (directions::columns(self.width), directions::rows(self.height));
         let w3 = self.width * 3;
         out.par_chunks_mut(w3).enumerate().for_each(|(r, row)| {
             self.row(r, &folded, row, simd);
-            self.background(r, lighting.background, &basis, &rows, &cols, row);
+            self.background(r, lighting.background, &rows, &cols, row);
         });
         Ok(())
     }
@@ -275,29 +273,50 @@ impl Relighter {
         }
     }
 
-    /// Background pixels show `background` (radiance SH) in their direction, or black.
-    fn background(&self, r: usize, background: Option<&[[f32; 3]]>, basis: &ShBasis, rows: &[(f64, f64)],
-                  cols: &[(f64, f64)], row: &mut [f32]) {
-        let mut y = [0.0f32; 25];
-        for c in 0..self.width {
-            if self.hit[r * self.width + c] {
-                continue;
+    /// Background pixels show `background` (radiance SH) in their direction, or black; 8 at a
+    /// time through the lane SH.
+    fn background(&self, r: usize, background: Option<&[[f32; 3]]>, rows: &[(f64, f64)], cols: &[(f64, f64)],
+                  row: &mut [f32]) {
+        let hit = &self.hit[r * self.width..(r + 1) * self.width];
+        let Some(sh) = background else {
+            for (c, _) in hit.iter().enumerate().filter(|(_, h)| !**h) {
+                row[c * 3..c * 3 + 3].fill(0.0);
             }
-            let value = match background {
-                None => [0.0; 3],
-                Some(sh) => {
-                    let d = directions::direction(&self.rotation, rows[r], cols[c]).map(|v| v as f32);
-                    basis.eval(d, &mut y);
-                    let mut v = [0.0f32; 3];
-                    for (i, l) in sh.iter().enumerate() {
-                        for ch in 0..3 {
-                            v[ch] += y[i] * l[ch];
-                        }
-                    }
-                    v
+            return;
+        };
+        let mut pending = [0usize; LANES];
+        let mut count = 0;
+        for c in (0..self.width).filter(|&c| !hit[c]) {
+            pending[count] = c;
+            count += 1;
+            if count == LANES {
+                self.background_lanes(r, &pending, count, sh, rows, cols, row);
+                count = 0;
+            }
+        }
+        if count > 0 {
+            self.background_lanes(r, &pending, count, sh, rows, cols, row);
+        }
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn background_lanes(&self, r: usize, columns: &[usize; LANES], count: usize, sh: &[[f32; 3]], rows: &[(f64, f64)],
+                        cols: &[(f64, f64)], row: &mut [f32]) {
+        let (mut x, mut y, mut z) = ([0.0f32; LANES], [0.0f32; LANES], [0.0f32; LANES]);
+        for j in 0..count {
+            let d = directions::direction(&self.rotation, rows[r], cols[columns[j]]);
+            (x[j], y[j], z[j]) = (d[0] as f32, d[1] as f32, d[2] as f32);
+        }
+        let mut basis = [[0.0f32; LANES]; 25];
+        sh_lanes::eval(&x, &y, &z, self.coeffs, &mut basis);
+        for j in 0..count {
+            let mut v = [0.0f32; 3];
+            for (i, l) in sh.iter().enumerate() {
+                for ch in 0..3 {
+                    v[ch] += basis[i][j] * l[ch];
                 }
-            };
-            row[c * 3..c * 3 + 3].copy_from_slice(&value);
+            }
+            row[columns[j] * 3..columns[j] * 3 + 3].copy_from_slice(&v);
         }
     }
 }
