@@ -75,8 +75,9 @@ def main(argv=None):
     shutil.rmtree(out, ignore_errors=True)
     out.mkdir(parents=True)
     _, site = demo_blender.prepare_user_resources(args.user_resources)
+    import bpy  # after the user folder is set: bpy reads it when imported
+
     demo_blender.use_addon(args.source, args.zip, site)
-    import bpy
     import hemishadow.panorama as hp
     import numpy as np
     import panorama_cycles as bench
