@@ -4,11 +4,12 @@ equirectangular panorama sees first, read from Cycles' data passes.
 One Cycles render, 1 sample, pixel filter 0.01 px (no mixing across edges), of a panoramic
 equirectangular camera: Position, Normal (shading), Diffuse Color (the Principled BSDF's Base
 Color when metallic, transmission and the specular layer are 0: the specular layer is switched
-off for the render) and Object Index passes; the geometric normal is
-the normal of the first triangle on each pixel's ray: the engine's own ray cast where it sees
-the same object as Cycles, Blender's BVH (a Python loop, about 2 s per 100 000 pixels) for the
-few pixels on silhouettes where they differ. A temporary camera (and temporary render settings, pass indices, specular levels
-and visibility of non-mesh geometry) is used and everything is put back afterwards, also on error.
+off for the render) and Object Index passes. The geometric normal is that of the first
+triangle on each pixel's ray: the engine's own ray cast where it sees the same object as
+Cycles, Blender's BVH (a Python loop, about 2 s per 100 000 pixels) for the few pixels on
+silhouettes where they differ. A temporary camera (and temporary render settings, pass
+indices, specular levels and visibility of non-mesh geometry) is used and everything is put
+back afterwards, also on error.
 
 The viewpoint's frame follows docs/panoramas.md: with `--at` (identity) the centre column looks
 along +X, the left quarter along +Y, the top row along +Z, which is a panoramic camera rotated
@@ -31,8 +32,8 @@ from . import probes
 # A panoramic camera with this rotation gives the identity frame (`--at`).
 CAMERA_FRAME = ((0.0, 0.0, -1.0), (-1.0, 0.0, 0.0), (0.0, 1.0, 0.0))  # Euler (90, 0, -90) degrees, as a matrix
 _GEOMETRY = {"CURVE", "SURFACE", "META", "FONT", "CURVES", "POINTCLOUD", "VOLUME", "GREASEPENCIL", "GPENCIL"}
-BACK_FACE_LIMIT = 0.5
-DEFAULT_ALBEDO = 0.8  # meshes without a material: Blender's default grey  # more back faces than this among the hits: the viewpoint is inside a mesh
+BACK_FACE_LIMIT = 0.5  # more back faces than this among the hits: the viewpoint is inside a mesh
+DEFAULT_ALBEDO = 0.8  # meshes without a material: Blender's default grey
 
 
 def viewpoint(scene, camera=None, at=None):

@@ -158,7 +158,8 @@ def on_depsgraph_update(scene, depsgraph):
     settings = getattr(scene, "hemishadow_panorama", None)
     if settings is None or not settings.live or settings.lights != "LAMPS":
         return
-    if any(_is_lamp_update(u) for u in depsgraph.updates) or (settings.use_world and depsgraph.id_type_updated("WORLD")):
+    world = settings.use_world and depsgraph.id_type_updated("WORLD")
+    if world or any(_is_lamp_update(u) for u in depsgraph.updates):
         request(scene)
 
 

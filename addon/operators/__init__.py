@@ -1,6 +1,7 @@
 """Operators, one module per job: live.py (compute, live toggle, clear, material),
 bake.py (bake a frame range to a cache), world.py (precompute World lighting), jobs.py
-(heavy meshes in the background) lightmaps.py (bake lightmaps), probes.py (bake probes, preview) and panorama.py (bake, relight, save)."""
+(heavy meshes in the background) lightmaps.py (bake lightmaps), probes.py (bake probes, preview)
+and panorama.py (bake, relight, save)."""
 
 import bpy
 
