@@ -4,7 +4,8 @@
 //! them fold into one weight per map and channel (a linear combination of maps); a point
 //! light gives L_i = I f(d) Y_i(l) with l and d from the pixel's position, evaluated per pixel.
 //!
-//! Maps are k planes of H x W x 3 values, 8-bit (value = offset + scale * byte / 255, the
+//! Maps come as k planes of H x W x 3 values and are kept row by row (row r of every map
+//! together: one relight reads memory front to back), 8-bit (value = offset + scale * byte / 255, the
 //! scale and offset folded into the weights) or float16. Rows run in parallel; within a row,
 //! blocks of 8 pixels (24 interleaved values) go through AVX2 when the CPU has it, else the
 //! portable code, which performs the same IEEE operations in the same order (same bits).
@@ -86,6 +87,10 @@ impl Relighter {
             return Err(Error::invalid(format!("8-bit maps need {coeffs} scales and offsets")));
         }
         let plane = |a: usize| position.iter().map(|p| p[a]).collect::<Vec<f32>>();
+        let maps = match maps {
+            Maps::U8(m) => Maps::U8(by_rows(&m, coeffs, height, width * 3)),
+            Maps::F16(m) => Maps::F16(by_rows(&m, coeffs, height, width * 3)),
+        };
         Ok(Relighter { width, height, coeffs, maps, scale, offset, position: [plane(0), plane(1), plane(2)], hit, rotation })
     }
 
@@ -178,6 +183,12 @@ impl Relighter {
         }
     }
 
+    /// Where row r of map i starts in `maps`.
+    #[inline(always)]
+    pub(crate) fn map_start(&self, r: usize, i: usize) -> usize {
+        (r * self.coeffs + i) * self.width * 3
+    }
+
     pub(crate) fn maps(&self) -> &Maps {
         &self.maps
     }
@@ -185,11 +196,10 @@ impl Relighter {
     /// The pixels p .. p + lanes of row r (out: their 3 * lanes values).
     fn block_portable(&self, r: usize, p: usize, lanes: usize, folded: &Folded, out: &mut [f32]) {
         let k = self.coeffs;
-        let first = (r * self.width + p) * 3;
         let n = out.len();
         let mut raw = [[0.0f32; 3 * LANES]; 25];
         for (i, values) in raw.iter_mut().enumerate().take(k) {
-            let start = i * self.width * self.height * 3 + first;
+            let start = self.map_start(r, i) + p * 3;
             match &self.maps {
                 Maps::U8(m) => values[..n].iter_mut().zip(&m[start..start + n]).for_each(|(v, b)| *v = *b as f32),
                 Maps::F16(m) => values[..n].iter_mut().zip(&m[start..start + n]).for_each(|(v, b)| *v = half::to_f32(*b)),
@@ -319,4 +329,16 @@ impl Relighter {
             row[columns[j] * 3..columns[j] * 3 + 3].copy_from_slice(&v);
         }
     }
+}
+
+/// (k, H, row) planes -> (H, k, row): each panorama row's maps side by side.
+fn by_rows<T: Copy>(planes: &[T], k: usize, height: usize, row: usize) -> Vec<T> {
+    let mut out = Vec::with_capacity(planes.len());
+    for r in 0..height {
+        for i in 0..k {
+            let start = (i * height + r) * row;
+            out.extend_from_slice(&planes[start..start + row]);
+        }
+    }
+    out
 }
