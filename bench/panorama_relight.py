@@ -7,12 +7,15 @@ docs/benchmarks_panorama.md.
 
 Relights go into one preallocated float32 (H, W, 3) array (file output excluded). Each case
 runs for --seconds; the page gives the best and the median wall time per relight (the best
-is what the code does on an idle machine; on a loaded one the median shows the load) and
-the process CPU time per relight (both cores' work summed).
+is what the code does on an idle machine; on a loaded one the median shows the load), the
+process CPU time per relight (both cores' work summed), and the best time of the AVX2 cases
+on one thread (a second process with RAYON_NUM_THREADS=1): on a shared machine, what one
+core does when it gets its turn.
 """
 
 import argparse
 import datetime
+import json
 import os
 import platform
 import subprocess
@@ -25,6 +28,7 @@ import trimesh
 
 import hemishadow
 from hemishadow import panorama as pano
+from hemishadow.environment import default_hdri
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -74,13 +78,45 @@ def commit():
         return "?"
 
 
+def cases_for(bands):
+    env_sh = hemishadow.project_environment(os.fspath(default_hdri()), bands=bands)
+    return {
+        "sun": [pano.Sun((0.4, 0.3, 1.0), 3.0)],
+        "environment": [pano.Environment(env_sh)],
+        "point": [pano.Point((0.5, -0.8, 0.6), 150.0)],
+        "sun + point + environment": [pano.Sun((0.4, 0.3, 1.0), 3.0), pano.Point((0.5, -0.8, 0.6), 150.0),
+                                      pano.Environment(env_sh)],
+    }
+
+
+def single_thread(files, seconds):
+    """{maps: {case: best seconds}} of the AVX2 cases in a process with one rayon thread."""
+    env = dict(os.environ, RAYON_NUM_THREADS="1")
+    done = subprocess.run([sys.executable, os.path.abspath(__file__), "--single", *files, "--seconds", str(seconds)],
+                          env=env, capture_output=True, text=True, check=True)
+    return json.loads(done.stdout)
+
+
+def run_single(files, seconds):
+    result = {}
+    for maps, path in zip(("8bit", "float16"), files):
+        source = pano.Panorama.load(path)
+        out = np.empty((source.height, source.width, 3), np.float32)
+        result[maps] = {name: timed(lambda: pano.relight(source, lights, maps=maps, out=out), seconds)[0]
+                        for name, lights in cases_for(source.bands).items()}
+    print(json.dumps(result))
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--single", nargs=2, metavar=("JSON", "EXR"), help=argparse.SUPPRESS)
     parser.add_argument("--size", default="1024x512")
     parser.add_argument("--coefficients", type=int, choices=(9, 16, 25), default=16)
     parser.add_argument("--seconds", type=float, default=3.0, help="time per relight case")
     parser.add_argument("--out", default=os.path.join(ROOT, "docs", "benchmarks_panorama.md"))
     args = parser.parse_args(argv)
+    if args.single:
+        return run_single(args.single, args.seconds)
     width, height = (int(v) for v in args.size.split("x"))
     bands = int(round(args.coefficients ** 0.5))
     load_before = os.getloadavg()[0]
@@ -96,19 +132,14 @@ def main(argv=None):
     print(f"bake: hits {hits_time:.2f} s, transfer {bake_time:.1f} s", file=sys.stderr)
 
     with tempfile.TemporaryDirectory() as tmp:
-        exr = baked.save(os.path.join(tmp, "p.exr"))
-        small = baked.save(os.path.join(tmp, "c", "panorama.json"))
-        loaded = pano.Panorama.load(os.path.join(tmp, "c", "panorama.json"))
+        files = [os.path.join(tmp, "c", "panorama.json"), os.path.join(tmp, "p.exr")]
+        exr = baked.save(files[1])
+        small = baked.save(files[0])
+        loaded = pano.Panorama.load(files[0])
         position_bytes = os.path.getsize(os.path.join(tmp, "c", "position.f32"))
+        one_thread = single_thread(files, args.seconds)
 
-    env_sh = hemishadow.project_environment(os.fspath(hemishadow.environment.default_hdri()), bands=bands)
-    cases = {
-        "sun": [pano.Sun((0.4, 0.3, 1.0), 3.0)],
-        "environment": [pano.Environment(env_sh)],
-        "point": [pano.Point((0.5, -0.8, 0.6), 150.0)],
-        "sun + point + environment": [pano.Sun((0.4, 0.3, 1.0), 3.0), pano.Point((0.5, -0.8, 0.6), 150.0),
-                                      pano.Environment(env_sh)],
-    }
+    cases = cases_for(bands)
     # Quantization: the 8-bit maps against the float16 ones, relit.
     quant = {}
     for name in ("sun", "environment", "point"):
@@ -131,7 +162,8 @@ def main(argv=None):
                 best, median, cpu = timed(lambda: pano.relight(source, lights, maps=maps, out=out, simd=simd), seconds)
                 points = any(isinstance(light, pano.Point) for light in lights)
                 read = relighter.bytes_read(points) + out.nbytes
-                rows.append((maps, "AVX2" if simd else "portable", name, best, median, cpu, read / best / 1e9))
+                single = one_thread[maps].get(name) if simd else None
+                rows.append((maps, "AVX2" if simd else "portable", name, best, median, cpu, read / best / 1e9, single))
                 print(f"{maps} {rows[-1][1]} {name}: {1 / best:.0f}/s best, {1 / median:.0f}/s median", file=sys.stderr)
     load_after = os.getloadavg()[0]
     write_page(args, width, height, triangles, hits_time, bake_time, exr, small, position_bytes, quant, rows,
@@ -160,11 +192,14 @@ def write_page(args, width, height, triangles, hits_time, bake_time, exr, small,
         "(light set-up included). GB/s = bytes the kernel reads (maps, positions for point lights) plus the "
         "output it writes, per best time.",
         "",
-        "| maps | code | lights | relights/s (best) | relights/s (median) | CPU ms per relight | GB/s (best) |",
-        "|---|---|---|---|---|---|---|",
+        "| maps | code | lights | relights/s (best) | relights/s (median) | CPU ms per relight | GB/s (best) "
+        "| 1 thread: relights/s (best) |",
+        "|---|---|---|---|---|---|---|---|",
     ]
-    for maps, code, name, best, median, cpu, gbs in rows:
-        lines.append(f"| {maps} | {code} | {name} | {1 / best:.0f} | {1 / median:.0f} | {cpu * 1e3:.1f} | {gbs:.1f} |")
+    for maps, code, name, best, median, cpu, gbs, single in rows:
+        one = f"{1 / single:.0f}" if single else "-"
+        lines.append(f"| {maps} | {code} | {name} | {1 / best:.0f} | {1 / median:.0f} | {cpu * 1e3:.1f} | {gbs:.1f} "
+                     f"| {one} |")
     target = {r[2]: r for r in rows if r[0] == "8bit" and r[1] == "AVX2"}
     lines += [
         "",
