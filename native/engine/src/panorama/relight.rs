@@ -4,10 +4,13 @@
 //! them fold into one weight per map and channel (a linear combination of maps); a point
 //! light gives L_i = I f(d) Y_i(l) with l and d from the pixel's position, evaluated per pixel.
 //!
-//! Maps are k planes of H x W x 3 values, 8-bit (value = offset + scale * byte / 255, the
+//! Maps come as k planes of H x W x 3 values and are kept row by row (row r of every map
+//! together: one relight reads memory front to back), 8-bit (value = offset + scale * byte / 255, the
 //! scale and offset folded into the weights) or float16. Rows run in parallel; within a row,
 //! blocks of 8 pixels (24 interleaved values) go through AVX2 when the CPU has it, else the
 //! portable code, which performs the same IEEE operations in the same order (same bits).
+
+use std::sync::{Arc, Mutex};
 
 use rayon::prelude::*;
 
@@ -34,6 +37,9 @@ pub struct Relighter {
     position: [Vec<f32>; 3],
     hit: Vec<bool>,
     rotation: Rotation,
+    /// The background of the last environment (its SH and H*W*3 values): dragging a sun under
+    /// a fixed environment does not evaluate it again.
+    background_cache: Mutex<Option<(Vec<[f32; 3]>, Arc<Vec<f32>>)>>,
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -86,7 +92,12 @@ impl Relighter {
             return Err(Error::invalid(format!("8-bit maps need {coeffs} scales and offsets")));
         }
         let plane = |a: usize| position.iter().map(|p| p[a]).collect::<Vec<f32>>();
-        Ok(Relighter { width, height, coeffs, maps, scale, offset, position: [plane(0), plane(1), plane(2)], hit, rotation })
+        let maps = match maps {
+            Maps::U8(m) => Maps::U8(by_rows(&m, coeffs, height, width * 3)),
+            Maps::F16(m) => Maps::F16(by_rows(&m, coeffs, height, width * 3)),
+        };
+        Ok(Relighter { width, height, coeffs, maps, scale, offset, position: [plane(0), plane(1), plane(2)], hit, rotation,
+                       background_cache: Mutex::new(None) })
     }
 
     /// Bytes the kernel reads per relight (maps, plus positions when point lights are on).
@@ -126,13 +137,35 @@ impl Relighter {
         }
         let folded = self.fold(lighting);
         let simd = simd && Self::simd_available();
-        let (cols, rows) = (directions::columns(self.width), directions::rows(self.height));
+        let background = lighting.background.map(|sh| self.background_image(sh));
         let w3 = self.width * 3;
         out.par_chunks_mut(w3).enumerate().for_each(|(r, row)| {
             self.row(r, &folded, row, simd);
-            self.background(r, lighting.background, &rows, &cols, row);
+            let hit = &self.hit[r * self.width..(r + 1) * self.width];
+            for c in (0..self.width).filter(|&c| !hit[c]) {
+                match &background {
+                    Some(image) => row[c * 3..c * 3 + 3].copy_from_slice(&image[r * w3 + c * 3..r * w3 + c * 3 + 3]),
+                    None => row[c * 3..c * 3 + 3].fill(0.0),
+                }
+            }
         });
         Ok(())
+    }
+
+    /// The radiance of environment `sh` at every background pixel (H*W*3), cached.
+    fn background_image(&self, sh: &[[f32; 3]]) -> Arc<Vec<f32>> {
+        let mut cache = self.background_cache.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some((key, image)) = cache.as_ref() {
+            if key.as_slice() == sh {
+                return image.clone();
+            }
+        }
+        let (cols, rows) = (directions::columns(self.width), directions::rows(self.height));
+        let mut image = vec![0.0f32; self.width * self.height * 3];
+        image.par_chunks_mut(self.width * 3).enumerate().for_each(|(r, row)| self.background(r, sh, &rows, &cols, row));
+        let image = Arc::new(image);
+        *cache = Some((sh.to_vec(), image.clone()));
+        image
     }
 
     fn fold(&self, lighting: &Lighting) -> Folded {
@@ -178,6 +211,12 @@ impl Relighter {
         }
     }
 
+    /// Where row r of map i starts in `maps`.
+    #[inline(always)]
+    pub(crate) fn map_start(&self, r: usize, i: usize) -> usize {
+        (r * self.coeffs + i) * self.width * 3
+    }
+
     pub(crate) fn maps(&self) -> &Maps {
         &self.maps
     }
@@ -185,11 +224,10 @@ impl Relighter {
     /// The pixels p .. p + lanes of row r (out: their 3 * lanes values).
     fn block_portable(&self, r: usize, p: usize, lanes: usize, folded: &Folded, out: &mut [f32]) {
         let k = self.coeffs;
-        let first = (r * self.width + p) * 3;
         let n = out.len();
         let mut raw = [[0.0f32; 3 * LANES]; 25];
         for (i, values) in raw.iter_mut().enumerate().take(k) {
-            let start = i * self.width * self.height * 3 + first;
+            let start = self.map_start(r, i) + p * 3;
             match &self.maps {
                 Maps::U8(m) => values[..n].iter_mut().zip(&m[start..start + n]).for_each(|(v, b)| *v = *b as f32),
                 Maps::F16(m) => values[..n].iter_mut().zip(&m[start..start + n]).for_each(|(v, b)| *v = half::to_f32(*b)),
@@ -273,17 +311,10 @@ impl Relighter {
         }
     }
 
-    /// Background pixels show `background` (radiance SH) in their direction, or black; 8 at a
-    /// time through the lane SH.
-    fn background(&self, r: usize, background: Option<&[[f32; 3]]>, rows: &[(f64, f64)], cols: &[(f64, f64)],
-                  row: &mut [f32]) {
+    /// Row r's background pixels: radiance SH `sh` in their direction, 8 at a time through the
+    /// lane SH.
+    fn background(&self, r: usize, sh: &[[f32; 3]], rows: &[(f64, f64)], cols: &[(f64, f64)], row: &mut [f32]) {
         let hit = &self.hit[r * self.width..(r + 1) * self.width];
-        let Some(sh) = background else {
-            for (c, _) in hit.iter().enumerate().filter(|(_, h)| !**h) {
-                row[c * 3..c * 3 + 3].fill(0.0);
-            }
-            return;
-        };
         let mut pending = [0usize; LANES];
         let mut count = 0;
         for c in (0..self.width).filter(|&c| !hit[c]) {
@@ -319,4 +350,16 @@ impl Relighter {
             row[columns[j] * 3..columns[j] * 3 + 3].copy_from_slice(&v);
         }
     }
+}
+
+/// (k, H, row) planes -> (H, k, row): each panorama row's maps side by side.
+fn by_rows<T: Copy>(planes: &[T], k: usize, height: usize, row: usize) -> Vec<T> {
+    let mut out = Vec::with_capacity(planes.len());
+    for r in 0..height {
+        for i in 0..k {
+            let start = (i * height + r) * row;
+            out.extend_from_slice(&planes[start..start + row]);
+        }
+    }
+    out
 }
