@@ -51,15 +51,16 @@ def active_volume(context):
     return None
 
 
-def scene_geometry(scene, depsgraph=None):
-    """(hemishadow.Scene, Surfaces, world triangles (M, 3, 3)) of the bake's meshes."""
+def scene_geometry(scene, depsgraph=None, *, live=False, purpose="bake probes against"):
+    """(hemishadow.Scene, Surfaces, world triangles (M, 3, 3)) of the bake's meshes; objects
+    with hemishadow enabled only when `live` (the panorama sees them; the probes light them)."""
     import hemishadow
     import hemishadow.lightmap as lm
 
     depsgraph = depsgraph or bpy.context.evaluated_depsgraph_get()
     engine_scene, surfaces, world = hemishadow.Scene(), [], []
     for obj in lightmaps.blockers(scene):
-        if getattr(getattr(obj, "hemishadow", None), "enabled", False):
+        if not live and getattr(getattr(obj, "hemishadow", None), "enabled", False):
             continue  # live-shaded: lit by the grid, not part of it
         data = lightmaps.read_mesh(obj, depsgraph, albedo=True)
         if not len(data.triangles):
@@ -72,7 +73,7 @@ def scene_geometry(scene, depsgraph=None):
         placed = data.vertices.astype(np.float64) @ matrix[:3, :3].T + matrix[:3, 3]
         world.append(placed[data.triangles])
     if not surfaces:
-        raise ValueError(f"scene {scene.name!r} has no visible, renderable mesh to bake probes against")
+        raise ValueError(f"scene {scene.name!r} has no visible, renderable mesh to {purpose}")
     return engine_scene, surfaces, np.concatenate(world)
 
 
