@@ -1,0 +1,114 @@
+"""The web viewer's local server: `python -m hemishadow serve PANORAMA.json`.
+
+Serves, on 127.0.0.1 only:
+    /                     the viewer (the files of web/ beside this module)
+    /panorama/FILE        the files of the compact panorama's folder (panorama.json, shNN.png, alpha.png,
+                          position.f32)
+    /environments.json    {"environments": [{"name", "sh": k rows of [r, g, b]}]}: lighting SH of Blender's
+                          bundled HDRIs (projected once at start), truncated to the panorama's k
+Nothing else is reachable: no directory listings, no path outside those folders.
+"""
+
+from __future__ import annotations
+
+import http.server
+import json
+import math
+import pathlib
+import threading
+import urllib.parse
+
+WEB = pathlib.Path(__file__).resolve().parent / "web"
+TYPES = {".html": "text/html; charset=utf-8", ".js": "text/javascript; charset=utf-8", ".css": "text/css",
+         ".json": "application/json", ".png": "image/png", ".f32": "application/octet-stream"}
+
+
+def read_panorama(path) -> dict:
+    """The compact panorama's JSON, checked enough that the viewer will find its files."""
+    path = pathlib.Path(path)
+    try:
+        meta = json.loads(path.read_text())
+    except (OSError, ValueError) as error:
+        raise ValueError(f"{path}: cannot read the panorama ({error})") from None
+    if not isinstance(meta, dict) or meta.get("format") != "hemishadow-panorama" or meta.get("version") != 1:
+        raise ValueError(f"{path}: not a compact hemishadow panorama (format hemishadow-panorama, version 1)")
+    files = [m.get("file") for m in meta.get("maps", [])]
+    files += [meta.get("position", {}).get("file"), meta.get("alpha", {}).get("file")]
+    for name in files:
+        if not isinstance(name, str) or not (path.parent / name).is_file():
+            raise ValueError(f"{path}: names {name!r}, which is not a file beside it")
+    return meta
+
+
+def uniform_white(count: int) -> list:
+    """The SH of a uniform white environment of radiance 1 (an open surface reads albedo)."""
+    sh = [[0.0, 0.0, 0.0] for _ in range(count)]
+    sh[0] = [2 * math.sqrt(math.pi)] * 3  # 1 / Y00
+    return sh
+
+
+def environments(count: int) -> list[dict]:
+    """White, then Blender's bundled HDRIs (when the bpy module and OpenEXR are installed)."""
+    out = [{"name": "white", "sh": uniform_white(count)}]
+    try:
+        from .. import project_environment
+        from ..environment import builtin_hdris
+
+        hdris = builtin_hdris()
+    except ImportError:
+        return out
+    bands = math.isqrt(count)
+    for name, path in hdris.items():
+        try:
+            sh = project_environment(path, bands=bands)
+        except (ImportError, OSError, ValueError):
+            continue  # no OpenEXR, an unreadable file: that environment is left out
+        out.append({"name": name, "sh": [[float(v) for v in row] for row in sh]})
+    return out
+
+
+def make_server(panorama_json, port: int = 0, environments_json: bytes | None = None):
+    """A ThreadingHTTPServer on 127.0.0.1:port (0: any free port); call serve_forever()."""
+    path = pathlib.Path(panorama_json).resolve()
+    meta = read_panorama(path)
+    lock, cache = threading.Lock(), [environments_json]
+
+    def environments_bytes() -> bytes:  # projected on first use (a few seconds), not before the server starts
+        with lock:
+            if cache[0] is None:
+                cache[0] = json.dumps({"environments": environments(len(meta["maps"]))}).encode()
+            return cache[0]
+
+    roots = {"": WEB, "panorama/": path.parent}
+
+    class Handler(http.server.BaseHTTPRequestHandler):
+        def do_GET(self):  # noqa: N802 (http.server's name)
+            name = urllib.parse.unquote(urllib.parse.urlsplit(self.path).path).lstrip("/") or "index.html"
+            if name == "environments.json":
+                return self.reply(environments_bytes(), TYPES[".json"])
+            prefix = "panorama/" if name.startswith("panorama/") else ""
+            root = roots[prefix]
+            file = (root / name[len(prefix):]).resolve()
+            if file.parent != root or not file.is_file():  # one folder deep: no listings, no escapes
+                return self.send_error(404)
+            return self.reply(file.read_bytes(), TYPES.get(file.suffix, "application/octet-stream"))
+
+        def reply(self, body: bytes, kind: str):
+            self.send_response(200)
+            self.send_header("Content-Type", kind)
+            self.send_header("Content-Length", str(len(body)))
+            self.send_header("Cache-Control", "no-store")
+            self.end_headers()
+            self.wfile.write(body)
+
+        def log_message(self, *args):  # quiet: errors still reach the browser
+            pass
+
+    return http.server.ThreadingHTTPServer(("127.0.0.1", port), Handler)
+
+
+def serve_in_thread(panorama_json, port: int = 0, environments_json: bytes | None = None):
+    """Start a server in a daemon thread (tests); returns it (server.server_address, server.shutdown())."""
+    server = make_server(panorama_json, port, environments_json)
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    return server

@@ -1,0 +1,239 @@
+"""The web viewer (hemishadow/panorama/web) in headless Chromium against the relight's sums.
+
+A small compact panorama with known content (a box room seen from inside, a window of background, transfer
+projected per pixel with an occluder) is written in the contract's file format, served by the viewer's server,
+opened with the lights in the URL and screenshot; the picture must match the reference relight (8-bit sRGB,
+Blender's Standard view transform) within 2/255 on 99 % of pixels.
+
+Chromium: Debian's `chromium` (scripts/setup.sh installs it). WebGL2 runs on SwiftShader, Chromium's
+software Vulkan, through ANGLE: --use-angle=swiftshader --enable-unsafe-swiftshader (the latter is what
+newer Chromium asks for before it uses SwiftShader for WebGL). Without chromium the tests skip, except on
+CI (CI=true), where they fail.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import pathlib
+import shutil
+import subprocess
+import sys
+import time
+import urllib.error
+import urllib.parse
+import urllib.request
+
+import numpy as np
+import pytest
+
+import hemishadow
+from hemishadow.sh import fibonacci_directions, rotate_sh, rotation_matrix
+
+PIL = pytest.importorskip("PIL.Image")
+
+CHROMIUM_FLAGS = ["--headless", "--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
+                  "--force-device-scale-factor=1", "--force-color-profile=srgb", "--hide-scrollbars",
+                  "--disable-extensions", "--no-first-run", "--disable-dev-shm-usage"]
+WINDOW = (400, 300)
+
+
+def chromium() -> str:
+    found = shutil.which("chromium") or shutil.which("chromium-browser")
+    if found:
+        return found
+    if os.environ.get("CI", "").lower() == "true":
+        pytest.fail("chromium is not installed (CI=true): scripts/setup.sh installs Debian's chromium package")
+    pytest.skip("chromium is not installed (Debian: apt-get install chromium, or scripts/setup.sh)")
+
+
+# --- the test panorama -------------------------------------------------------------------------------------
+
+def directions(width, height):
+    """The contract's equirectangular mapping, (H, W, 3), row 0 at the top."""
+    u = (np.arange(width) + 0.5) / width
+    v = 1 - (np.arange(height) + 0.5) / height
+    phi = (0.5 - u)[None, :] * 2 * np.pi
+    theta = (v - 0.5)[:, None] * np.pi
+    return np.stack(np.broadcast_arrays(np.cos(theta) * np.cos(phi), np.cos(theta) * np.sin(phi),
+                                        np.sin(theta)), axis=-1)
+
+
+def room(width, height, bands, rotation, origin):
+    """A box room (half sizes 3, 2.5, 2) seen from `origin`: coefficients (H, W, k, 3) of
+    albedo * V * max(0, n.w) / pi with an occluder per pixel, positions, the hit mask (a window in the +X wall
+    is background)."""
+    half = np.array([3.0, 2.5, 2.0])
+    d = directions(width, height) @ np.asarray(rotation).T
+    with np.errstate(divide="ignore"):
+        t_axis = (np.sign(d) * half - origin) / d
+    axis = np.argmin(t_axis, axis=-1)
+    t = np.take_along_axis(t_axis, axis[..., None], -1)[..., 0]
+    position = origin + t[..., None] * d
+    normal = -np.sign(np.take_along_axis(d, axis[..., None], -1)) * np.eye(3)[axis]
+    hit = ~((axis == 0) & (d[..., 0] > 0) & (np.abs(position[..., 1]) < 1.0) & (np.abs(position[..., 2] - 0.3) < 0.6))
+    wall_colour = np.array([[0.8, 0.3, 0.2], [0.2, 0.7, 0.3], [0.6, 0.6, 0.8]])[axis]
+    checker = ((np.floor(position[..., 0] * 2) + np.floor(position[..., 1] * 2) + np.floor(position[..., 2] * 2)) % 2)
+    albedo = wall_colour * (0.6 + 0.4 * checker[..., None])
+    blocker = normal + 0.8 * np.stack([np.sin(3 * position[..., 1]), np.cos(2 * position[..., 2]),
+                                       np.sin(position[..., 0])], -1)
+    blocker /= np.linalg.norm(blocker, axis=-1, keepdims=True)
+    w = fibonacci_directions(1500)
+    y = hemishadow.sh_basis(w.astype(np.float32), bands).astype(np.float64)  # (N, k)
+    cosine = np.maximum(0, normal.reshape(-1, 3) @ w.T) * ((blocker.reshape(-1, 3) @ w.T) < 0.8)
+    transfer = (cosine / np.pi) @ y * (4 * np.pi / len(w))  # (H*W, k), white
+    coefficients = transfer[:, :, None] * albedo.reshape(-1, 1, 3)
+    coefficients = coefficients.reshape(height, width, bands * bands, 3) * hit[..., None, None]
+    return coefficients, position * hit[..., None], hit
+
+
+def write_compact(folder: pathlib.Path, coefficients, position, hit, rotation, origin):
+    """The contract's compact form, written here independently of the engine's exporter."""
+    height, width, k, _ = coefficients.shape
+    folder.mkdir(parents=True)
+    maps = []
+    for i in range(k):
+        c = coefficients[:, :, i]
+        lo, hi = c.min(axis=(0, 1)), c.max(axis=(0, 1))
+        scale = np.where(hi > lo, hi - lo, 1.0)
+        data = np.round((c - lo) / scale * 255).astype(np.uint8)
+        PIL.fromarray(data, "RGB").save(folder / f"sh{i:02d}.png")
+        maps.append({"file": f"sh{i:02d}.png", "scale": scale.tolist(), "offset": lo.tolist()})
+    PIL.fromarray((hit * 255).astype(np.uint8), "L").save(folder / "alpha.png")
+    position.astype("<f4").tofile(folder / "position.f32")
+    meta = {"format": "hemishadow-panorama", "version": 1, "width": width, "height": height,
+            "bands": int(round(np.sqrt(k))), "coefficients": k, "origin": list(origin),
+            "rotation": np.asarray(rotation).tolist(), "maps": maps,
+            "position": {"file": "position.f32"}, "alpha": {"file": "alpha.png"}}
+    (folder / "panorama.json").write_text(json.dumps(meta))
+    return folder / "panorama.json"
+
+
+def dequantized(path: pathlib.Path):
+    meta = json.loads(path.read_text())
+    maps = [m["offset"] + np.asarray(m["scale"]) * np.asarray(PIL.open(path.parent / m["file"]), np.float64) / 255
+            for m in meta["maps"]]
+    shape = (meta["height"], meta["width"], 3)
+    position = np.fromfile(path.parent / meta["position"]["file"], "<f4").reshape(shape).astype(np.float64)
+    hit = np.asarray(PIL.open(path.parent / meta["alpha"]["file"])) > 127
+    return np.stack(maps, axis=2), position, hit, np.asarray(meta["rotation"])
+
+
+# --- the reference: the relight's sums in numpy -------------------------------------------------------------
+
+def reference_radiance(path, suns=(), points=(), env=None, env_rotation_deg=0.0):
+    """Linear radiance (H, W, 3): sum_i c_i (sum of the lights' SH weights) per surface pixel, the environment
+    seen in the pixel's direction for background pixels. env: (k, 3) lighting SH; env_rotation_deg turns it
+    about Z as the World's Mapping node does (the image is looked up at Rz d)."""
+    c, position, hit, rotation = dequantized(path)
+    height, width, k, _ = c.shape
+    bands = int(round(np.sqrt(k)))
+    basis = lambda d: hemishadow.sh_basis(np.asarray(d, np.float32).reshape(-1, 3), bands).astype(np.float64)  # noqa: E731
+    weights = np.zeros((k, 3))
+    for direction, strength in suns:
+        weights += strength * basis(np.asarray(direction) / np.linalg.norm(direction))[0][:, None]
+    env_sh = np.zeros((k, 3))
+    if env is not None:
+        turn = rotation_matrix((0, 0, 1), -np.radians(env_rotation_deg))
+        env_sh = rotate_sh(np.asarray(env, np.float64)[:k], turn).astype(np.float64)
+        weights += env_sh
+    per_pixel = np.broadcast_to(weights, (height, width, k, 3)).copy()
+    for light, power in points:
+        to_light = np.asarray(light) - position
+        d2 = np.sum(to_light ** 2, axis=-1)
+        y = basis(to_light / np.sqrt(d2)[..., None]).reshape(height, width, k)
+        per_pixel += (power / (4 * np.pi) / d2)[..., None, None] * y[..., None]
+    surface = np.sum(c * per_pixel, axis=2)
+    world = directions(width, height) @ rotation.T
+    background = (basis(world) @ env_sh).reshape(height, width, 3)
+    return np.where(hit[..., None], surface, background)
+
+
+def standard_view(radiance, exposure=0.0):
+    """Blender's Standard view transform to 8-bit: 2^EV, clip, the sRGB curve."""
+    c = np.clip(radiance * 2.0 ** exposure, 0, 1)
+    srgb = np.where(c <= 0.0031308, 12.92 * c, 1.055 * np.power(c, 1 / 2.4) - 0.055)
+    return np.round(srgb * 255).astype(np.uint8)
+
+
+# --- the viewer ---------------------------------------------------------------------------------------------
+
+def screenshot(url: str, width: int, height: int, out: pathlib.Path) -> np.ndarray:
+    """The viewer at `url` in headless Chromium, its canvas (top-left, one pixel per pixel) as (H, W, 3)."""
+    command = [chromium(), *CHROMIUM_FLAGS, f"--window-size={WINDOW[0]},{WINDOW[1]}",
+               "--virtual-time-budget=20000", f"--screenshot={out}", url]
+    result = subprocess.run(command, capture_output=True, text=True, timeout=120)
+    assert out.is_file(), f"chromium wrote no screenshot:\n{result.stderr[-2000:]}"
+    image = np.asarray(PIL.open(out).convert("RGB"))
+    return image[:height, :width]
+
+
+def page_state(url: str) -> str:
+    """The viewer's status line and state (for a failure's message)."""
+    result = subprocess.run([chromium(), *CHROMIUM_FLAGS, "--virtual-time-budget=20000", "--dump-dom", url],
+                            capture_output=True, text=True, timeout=120)
+    import re
+    state = re.search(r'<html[^>]*data-state="(\w+)"', result.stdout)
+    status = re.search(r'<p id="status">(.*?)</p>', result.stdout, re.S)
+    return f"state={state and state.group(1)} status={status and status.group(1)!r}"
+
+
+@pytest.fixture(scope="module")
+def served(tmp_path_factory):
+    """Two panoramas (25 coefficients turned 30 degrees about Z; 16 coefficients) behind the viewer's
+    server, with one environment."""
+    from hemishadow.panorama.server import serve_in_thread
+
+    root = tmp_path_factory.mktemp("panoweb")
+    origin = np.array([0.2, -0.1, 0.3])
+    turn = rotation_matrix((0, 0, 1), np.radians(30))
+    big = write_compact(root / "p25", *room(128, 64, 5, turn, origin), turn, origin)
+    small = write_compact(root / "p16", *room(96, 48, 4, np.eye(3), origin), np.eye(3), origin)
+    env = np.zeros((25, 3))
+    env[0] = [1.6, 1.8, 2.4]  # a sky brighter above, a warm glow towards +X
+    env[2] = [0.9, 1.0, 1.3]
+    env[3] = [-0.6, -0.3, 0.0]
+    env[6] = [0.2, 0.2, 0.3]
+    env[8] = [0.15, 0.1, -0.1]
+    env[10] = [0.1, 0.0, 0.05]
+    env[20] = [0.05, 0.05, 0.05]
+    environments = json.dumps({"environments": [{"name": "sky", "sh": env.tolist()}]}).encode()
+    servers = [serve_in_thread(path, 0, environments) for path in (big, small)]
+    bases = ["http://%s:%d/" % s.server_address[:2] for s in servers]
+    yield {"big": big, "small": small, "env": env, "bases": dict(zip(("big", "small"), bases))}
+    for server in servers:
+        server.shutdown()
+        server.server_close()
+
+
+def compare(base: str, name, query: dict, reference, tmp_path):
+    height, width = reference.shape[:2]
+    url = base + "?" + urllib.parse.urlencode({"ui": "0", **query}, doseq=True)
+    shot = screenshot(url, width, height, tmp_path / f"{name}.png")
+    error = np.abs(shot.astype(int) - reference.astype(int)).max(axis=-1)
+    within = float(np.mean(error <= 2))
+    print(f"{name}: {within * 100:.2f} % of pixels within 2/255, max error {error.max()}/255")
+    if within < 0.99:
+        PIL.fromarray(reference).save(tmp_path / f"{name}_reference.png")
+        pytest.fail(f"{name}: only {within * 100:.2f} % of pixels within 2/255 (max {error.max()}); "
+                    f"viewer {page_state(url)}; pictures in {tmp_path}")
+    return within, int(error.max())
+
+
+def test_sun_point_environment_and_exposure_match_the_relight(served, tmp_path):
+    """All the sums at once: a sun, a point lamp, an environment turned about Z, exposure; a turned viewpoint
+    (background directions) and 25 coefficients (every SH polynomial of the shader)."""
+    sun, point = ((0.4, -0.6, 0.7), 2.5), ((1.2, 0.8, -0.5), 150.0)
+    radiance = reference_radiance(served["big"], suns=[sun], points=[point], env=served["env"], env_rotation_deg=40)
+    reference = standard_view(radiance, exposure=-0.5)
+    assert 0.2 < np.mean(reference) / 255 < 0.8 and np.mean(reference == 255) < 0.05  # a picture, not clipped
+    compare(served["bases"]["big"], "all", {"sun": "0.4,-0.6,0.7,2.5",
+                            "point": "1.2,0.8,-0.5,150", "env": "sky,1", "envrot": "40", "exposure": "-0.5"},
+            reference, tmp_path)
+
+
+def test_point_light_alone_matches_the_relight(served, tmp_path):
+    """A point lamp alone, 1/d^2 from the float32 position map, 16 coefficients, background black."""
+    point = ((-1.5, 1.0, 0.8), 300.0)
+    reference = standard_view(reference_radiance(served["small"], points=[point]))
+    compare(served["bases"]["small"], "point", {"point": "-1.5,1,0.8,300"}, reference, tmp_path)
