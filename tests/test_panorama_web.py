@@ -16,13 +16,13 @@ from __future__ import annotations
 import json
 import os
 import pathlib
+import re
 import shutil
+import struct
 import subprocess
 import sys
-import time
-import urllib.error
 import urllib.parse
-import urllib.request
+import zlib
 
 import numpy as np
 import pytest
@@ -87,8 +87,18 @@ def room(width, height, bands, rotation, origin):
     return coefficients, position * hit[..., None], hit
 
 
-def write_compact(folder: pathlib.Path, coefficients, position, hit, rotation, origin):
-    """The contract's compact form, written here independently of the engine's exporter."""
+def add_gamma_chunk(path: pathlib.Path, gamma: float = 1.0) -> None:
+    """Give a PNG a gAMA chunk (after IHDR): a browser that honours it would change the data."""
+    data = path.read_bytes()
+    body = b"gAMA" + struct.pack(">I", round(gamma * 100000))
+    chunk = struct.pack(">I", 4) + body + struct.pack(">I", zlib.crc32(body) & 0xFFFFFFFF)
+    end_of_ihdr = 8 + 8 + 13 + 4
+    path.write_bytes(data[:end_of_ihdr] + chunk + data[end_of_ihdr:])
+
+
+def write_compact(folder: pathlib.Path, coefficients, position, hit, rotation, origin, gamma_chunk=False):
+    """The contract's compact form, written here independently of the engine's exporter. gamma_chunk: the
+    maps carry a gAMA chunk of 1.0 (not the contract's form), which the viewer must ignore as well."""
     height, width, k, _ = coefficients.shape
     folder.mkdir(parents=True)
     maps = []
@@ -98,6 +108,8 @@ def write_compact(folder: pathlib.Path, coefficients, position, hit, rotation, o
         scale = np.where(hi > lo, hi - lo, 1.0)
         data = np.round((c - lo) / scale * 255).astype(np.uint8)
         PIL.fromarray(data, "RGB").save(folder / f"sh{i:02d}.png")
+        if gamma_chunk:
+            add_gamma_chunk(folder / f"sh{i:02d}.png")
         maps.append({"file": f"sh{i:02d}.png", "scale": scale.tolist(), "offset": lo.tolist()})
     PIL.fromarray((hit * 255).astype(np.uint8), "L").save(folder / "alpha.png")
     position.astype("<f4").tofile(folder / "position.f32")
@@ -172,7 +184,6 @@ def page_state(url: str) -> str:
     """The viewer's status line and state (for a failure's message)."""
     result = subprocess.run([chromium(), *CHROMIUM_FLAGS, "--virtual-time-budget=20000", "--dump-dom", url],
                             capture_output=True, text=True, timeout=120)
-    import re
     state = re.search(r'<html[^>]*data-state="(\w+)"', result.stdout)
     status = re.search(r'<p id="status">(.*?)</p>', result.stdout, re.S)
     return f"state={state and state.group(1)} status={status and status.group(1)!r}"
@@ -180,7 +191,7 @@ def page_state(url: str) -> str:
 
 @pytest.fixture(scope="module")
 def served(tmp_path_factory):
-    """Two panoramas (25 coefficients turned 30 degrees about Z; 16 coefficients) behind the viewer's
+    """Two panoramas (25 coefficients turned 30 degrees about Z; 16 coefficients with gAMA chunks) behind the viewer's
     server, with one environment."""
     from hemishadow.panorama.server import serve_in_thread
 
@@ -188,7 +199,7 @@ def served(tmp_path_factory):
     origin = np.array([0.2, -0.1, 0.3])
     turn = rotation_matrix((0, 0, 1), np.radians(30))
     big = write_compact(root / "p25", *room(128, 64, 5, turn, origin), turn, origin)
-    small = write_compact(root / "p16", *room(96, 48, 4, np.eye(3), origin), np.eye(3), origin)
+    small = write_compact(root / "p16", *room(96, 48, 4, np.eye(3), origin), np.eye(3), origin, gamma_chunk=True)
     env = np.zeros((25, 3))
     env[0] = [1.6, 1.8, 2.4]  # a sky brighter above, a warm glow towards +X
     env[2] = [0.9, 1.0, 1.3]
@@ -233,7 +244,73 @@ def test_sun_point_environment_and_exposure_match_the_relight(served, tmp_path):
 
 
 def test_point_light_alone_matches_the_relight(served, tmp_path):
-    """A point lamp alone, 1/d^2 from the float32 position map, 16 coefficients, background black."""
+    """A point lamp alone, 1/d^2 from the float32 position map, 16 coefficients, background black; the maps
+    carry a gAMA chunk that must change nothing (they are data)."""
     point = ((-1.5, 1.0, 0.8), 300.0)
     reference = standard_view(reference_radiance(served["small"], points=[point]))
     compare(served["bases"]["small"], "point", {"point": "-1.5,1,0.8,300"}, reference, tmp_path)
+
+
+# --- `python -m hemishadow serve` ---------------------------------------------------------------------------
+
+WEB = pathlib.Path(hemishadow.__file__).parent / "panorama" / "web"
+
+
+def test_viewer_files_are_all_local():
+    """No CDN: the page and its scripts name no other host, and every file they load is in web/."""
+    names = {p.name for p in WEB.iterdir()}
+    assert {"index.html", "viewer.js", "relight.js", "sh.js", "viewer.css"} <= names
+    for path in WEB.iterdir():
+        text = path.read_text()
+        assert not re.search(r"(https?:)?//[a-z0-9.-]+\.[a-z]{2,}/", text, re.I), f"{path.name} names another host"
+        for ref in re.findall(r'(?:src|href)="([^"#]+)"|from "\./([^"]+)"', text):
+            ref = next(r for r in ref if r)
+            assert (WEB / ref).is_file(), f"{path.name} loads {ref}, which is not in {WEB}"
+
+
+def test_serve_command_serves_the_viewer_the_panorama_and_environments(served):
+    """The CLI on 127.0.0.1 (a free port), the viewer's files, the panorama's folder, the environments' SH
+    (white first, truncated to the panorama's coefficients), nothing outside those folders."""
+    import http.client
+
+    process = subprocess.Popen([sys.executable, "-m", "hemishadow", "serve", str(served["small"]), "--port", "0",
+                                "--no-browser"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        line = process.stdout.readline()
+        match = re.search(r"at (http://127\.0\.0\.1:(\d+)/)", line)
+        assert match, f"no URL on the first line: {line!r} {process.stderr.read() if process.poll() else ''}"
+        port = int(match.group(2))
+
+        def get(path):
+            connection = http.client.HTTPConnection("127.0.0.1", port, timeout=60)
+            connection.request("GET", path)
+            response = connection.getresponse()
+            return response.status, response.getheader("Content-Type"), response.read()
+
+        for name in ("index.html", "viewer.js", "relight.js", "sh.js", "viewer.css"):
+            status, kind, body = get("/" + name)
+            assert status == 200 and body == (WEB / name).read_bytes(), name
+        assert get("/")[2] == (WEB / "index.html").read_bytes()
+        assert get("/viewer.js")[1].startswith("text/javascript")  # module scripts need a JavaScript type
+        status, _, body = get("/panorama/panorama.json")
+        assert status == 200 and json.loads(body)["coefficients"] == 16
+        assert get("/panorama/sh15.png")[2] == (served["small"].parent / "sh15.png").read_bytes()
+        environments = json.loads(get("/environments.json")[2])["environments"]
+        assert environments[0]["name"] == "white"
+        assert all(len(e["sh"]) == 16 and all(len(row) == 3 for row in e["sh"]) for e in environments)
+        assert abs(environments[0]["sh"][0][0] * 0.282095 - 1) < 1e-5  # radiance 1 in every direction
+        for path in ("/panorama/../panorama.json", "/panorama/%2e%2e/p25/panorama.json", "/../cli.py",
+                     "/%2e%2e/server.py", "/panorama/", "/web/index.html", "/nothing.js"):
+            assert get(path)[0] == 404, path
+    finally:
+        process.terminate()
+        process.wait(timeout=30)
+
+
+def test_serve_command_names_a_bad_panorama(tmp_path):
+    (tmp_path / "panorama.json").write_text(json.dumps({"format": "hemishadow-panorama", "version": 1,
+                                                        "maps": [{"file": "sh00.png"}]}))
+    result = subprocess.run([sys.executable, "-m", "hemishadow", "serve", str(tmp_path / "panorama.json"),
+                             "--no-browser", "--port", "0"], capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2
+    assert "panorama.json: names 'sh00.png', which is not a file beside it" in result.stderr
