@@ -7,17 +7,18 @@ Blender's Standard view transform) within 2/255 on 99 % of pixels.
 
 Chromium: Debian's `chromium` (scripts/setup.sh installs it). WebGL2 runs on SwiftShader, Chromium's
 software Vulkan, through ANGLE: --use-angle=swiftshader --enable-unsafe-swiftshader (the latter is what
-newer Chromium asks for before it uses SwiftShader for WebGL). Without chromium the tests skip, except on
+newer Chromium asks for before it uses SwiftShader for WebGL; the flags: scripts/panorama_web_screenshot.py).
+Without chromium the tests skip, except on
 CI (CI=true), where they fail.
 """
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import os
 import pathlib
 import re
-import shutil
 import struct
 import subprocess
 import sys
@@ -32,16 +33,16 @@ from hemishadow.sh import fibonacci_directions, rotate_sh, rotation_matrix
 
 PIL = pytest.importorskip("PIL.Image")
 
-CHROMIUM_FLAGS = ["--headless", "--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
-                  "--force-device-scale-factor=1", "--force-color-profile=srgb", "--hide-scrollbars",
-                  "--disable-extensions", "--no-first-run", "--disable-dev-shm-usage"]
+ROOT = pathlib.Path(__file__).resolve().parent.parent
+_spec = importlib.util.spec_from_file_location("panorama_web_screenshot", ROOT / "scripts" / "panorama_web_screenshot.py")
+shots = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(shots)  # Chromium's flags and the screenshot, shared with the docs' figure
 WINDOW = (400, 300)
 
 
-def chromium() -> str:
-    found = shutil.which("chromium") or shutil.which("chromium-browser")
-    if found:
-        return found
+def require_chromium() -> None:
+    if shots.find_chromium():
+        return
     if os.environ.get("CI", "").lower() == "true":
         pytest.fail("chromium is not installed (CI=true): scripts/setup.sh installs Debian's chromium package")
     pytest.skip("chromium is not installed (Debian: apt-get install chromium, or scripts/setup.sh)")
@@ -172,20 +173,16 @@ def standard_view(radiance, exposure=0.0):
 
 def screenshot(url: str, width: int, height: int, out: pathlib.Path) -> np.ndarray:
     """The viewer at `url` in headless Chromium, its canvas (top-left, one pixel per pixel) as (H, W, 3)."""
-    command = [chromium(), *CHROMIUM_FLAGS, f"--window-size={WINDOW[0]},{WINDOW[1]}",
-               "--virtual-time-budget=20000", f"--screenshot={out}", url]
-    result = subprocess.run(command, capture_output=True, text=True, timeout=120)
-    assert out.is_file(), f"chromium wrote no screenshot:\n{result.stderr[-2000:]}"
-    image = np.asarray(PIL.open(out).convert("RGB"))
-    return image[:height, :width]
+    require_chromium()
+    shots.screenshot(url, out, WINDOW)
+    return np.asarray(PIL.open(out).convert("RGB"))[:height, :width]
 
 
 def page_state(url: str) -> str:
     """The viewer's status line and state (for a failure's message)."""
-    result = subprocess.run([chromium(), *CHROMIUM_FLAGS, "--virtual-time-budget=20000", "--dump-dom", url],
-                            capture_output=True, text=True, timeout=120)
-    state = re.search(r'<html[^>]*data-state="(\w+)"', result.stdout)
-    status = re.search(r'<p id="status">(.*?)</p>', result.stdout, re.S)
+    html = shots.run_chromium(url, "--dump-dom").stdout
+    state = re.search(r'<html[^>]*data-state="(\w+)"', html)
+    status = re.search(r'<p id="status">(.*?)</p>', html, re.S)
     return f"state={state and state.group(1)} status={status and status.group(1)!r}"
 
 
