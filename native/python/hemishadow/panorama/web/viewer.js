@@ -45,7 +45,7 @@ function stateFromUrl() {
   return {
     suns: suns.length ? suns : [{ ...DEFAULT_SUN }],
     sunOn: suns.length > 0 || !lit,
-    points: points.length ? points : [{ position: [0, 0, 0], power: 100 }],
+    points: points.length ? points : [{ position: null, power: 100 }],  // null: at the viewpoint, once loaded
     pointOn: points.length > 0,
     env,
     envRotation: params.has("envrot") ? numbers(params.get("envrot"), 1, "envrot")[0] : 0,
@@ -208,6 +208,7 @@ async function main() {
     loadEnvironments(params.get("environments") || "environments.json"),
   ]);
   relighter.upload(panorama);
+  state.points[0].position ??= panorama.origin.slice();
   for (const e of environments) $("env-name").append(new Option(e.name, e.name));
   let pending = false;
   const redraw = () => {
