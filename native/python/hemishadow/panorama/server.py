@@ -4,8 +4,9 @@ Serves, on 127.0.0.1 only:
     /                     the viewer (the files of web/ beside this module)
     /panorama/FILE        the files of the compact panorama's folder (panorama.json, shNN.png, alpha.png,
                           position.f32)
-    /environments.json    {"environments": [{"name", "sh": k rows of [r, g, b]}]}: lighting SH of Blender's
-                          bundled HDRIs (projected once at start), truncated to the panorama's k
+    /environments.json    {"environments": [{"name", "sh": k rows of [r, g, b]}]}: lighting SH of a white
+                          environment and Blender's bundled HDRIs (projected once, in the background from the
+                          start), truncated to the panorama's k
 Nothing else is reachable: no directory listings, no path outside those folders.
 """
 
@@ -71,13 +72,20 @@ def make_server(panorama_json, port: int = 0, environments_json: bytes | None = 
     """A ThreadingHTTPServer on 127.0.0.1:port (0: any free port); call serve_forever()."""
     path = pathlib.Path(panorama_json).resolve()
     meta = read_panorama(path)
-    lock, cache = threading.Lock(), [environments_json]
+    ready, cache = threading.Event(), [environments_json]
 
-    def environments_bytes() -> bytes:  # projected on first use (a few seconds), not before the server starts
-        with lock:
+    def project():  # a few seconds: started now, in the background, so the server answers at once
+        try:
+            cache[0] = json.dumps({"environments": environments(len(meta["maps"]))}).encode()
+        finally:  # whatever happened, the page gets an answer (white alone if the projection failed)
             if cache[0] is None:
-                cache[0] = json.dumps({"environments": environments(len(meta["maps"]))}).encode()
-            return cache[0]
+                cache[0] = json.dumps({"environments": [{"name": "white", "sh": uniform_white(len(meta["maps"]))}]}).encode()
+            ready.set()
+
+    if environments_json is None:
+        threading.Thread(target=project, daemon=True).start()
+    else:
+        ready.set()
 
     roots = {"": WEB, "panorama/": path.parent}
 
@@ -85,7 +93,8 @@ def make_server(panorama_json, port: int = 0, environments_json: bytes | None = 
         def do_GET(self):  # noqa: N802 (http.server's name)
             name = urllib.parse.unquote(urllib.parse.urlsplit(self.path).path).lstrip("/") or "index.html"
             if name == "environments.json":
-                return self.reply(environments_bytes(), TYPES[".json"])
+                ready.wait()
+                return self.reply(cache[0], TYPES[".json"])
             prefix = "panorama/" if name.startswith("panorama/") else ""
             root = roots[prefix]
             file = (root / name[len(prefix):]).resolve()
@@ -99,7 +108,10 @@ def make_server(panorama_json, port: int = 0, environments_json: bytes | None = 
             self.send_header("Content-Length", str(len(body)))
             self.send_header("Cache-Control", "no-store")
             self.end_headers()
-            self.wfile.write(body)
+            try:
+                self.wfile.write(body)
+            except ConnectionError:  # the browser left (a reload, a closed tab): nothing to tell anyone
+                pass
 
         def log_message(self, *args):  # quiet: errors still reach the browser
             pass

@@ -203,13 +203,19 @@ async function main() {
   document.body.classList.toggle("bare", bare);
   const state = stateFromUrl();
   const relighter = new Relighter($("view"));
-  const [panorama, environments] = await Promise.all([
-    loadPanorama(params.get("panorama") || "panorama/panorama.json"),
-    loadEnvironments(params.get("environments") || "environments.json"),
-  ]);
+  // The environments are projected by the server when it starts: wait for them only when the URL asks for one.
+  const environmentsLoading = loadEnvironments(params.get("environments") || "environments.json");
+  const panorama = await loadPanorama(params.get("panorama") || "panorama/panorama.json");
+  const environments = state.env.name ? await environmentsLoading : [];
   relighter.upload(panorama);
   state.points[0].position ??= panorama.origin.slice();
-  for (const e of environments) $("env-name").append(new Option(e.name, e.name));
+  const addEnvironments = (list) => {
+    if (list !== environments) environments.push(...list);
+    for (const e of list) $("env-name").append(new Option(e.name, e.name));
+    $("env-name").value = state.env.name;
+  };
+  if (state.env.name) addEnvironments(environments);
+  else environmentsLoading.then(addEnvironments, (error) => { $("status").textContent = error.message; });
   let pending = false;
   const redraw = () => {
     if (pending) return;
