@@ -21,6 +21,7 @@ pub mod receivers;
 pub mod segments;
 pub mod top;
 pub mod traverse;
+pub mod world;
 
 use std::sync::atomic::{AtomicU64, Ordering};
 

@@ -1,0 +1,284 @@
+//! Native relighting of a baked panorama (Wong et al. 2003): outgoing radiance per pixel =
+//! sum_i c_i L_i, with c_i the pixel's SH maps (albedo and 1/pi included) and L_i the SH of
+//! the incident light. Suns and environments give the same L_i for every pixel, so all of
+//! them fold into one weight per map and channel (a linear combination of maps); a point
+//! light gives L_i = I f(d) Y_i(l) with l and d from the pixel's position, evaluated per pixel.
+//!
+//! Maps are k planes of H x W x 3 values, 8-bit (value = offset + scale * byte / 255, the
+//! scale and offset folded into the weights) or float16. Rows run in parallel; within a row,
+//! blocks of 8 pixels (24 interleaved values) go through AVX2 when the CPU has it, else the
+//! portable code, which performs the same IEEE operations in the same order (same bits).
+
+use rayon::prelude::*;
+
+use super::directions::{self, Rotation};
+use super::half;
+use super::sh_lanes::{self, Lanes, LANES};
+use crate::error::{Error, Result};
+use crate::sh::ShBasis;
+
+pub enum Maps {
+    U8(Vec<u8>),
+    /// IEEE half bits.
+    F16(Vec<u16>),
+}
+
+pub struct Relighter {
+    pub width: usize,
+    pub height: usize,
+    pub coeffs: usize,
+    maps: Maps,
+    /// Per map, per channel: value = offset + scale * byte / 255 (8-bit maps only).
+    scale: Vec<[f32; 3]>,
+    offset: Vec<[f32; 3]>,
+    /// Position planes (x, y, z), H x W each, for point lights.
+    position: [Vec<f32>; 3],
+    hit: Vec<bool>,
+    rotation: Rotation,
+}
+
+#[derive(Clone, Copy, Debug)]
+pub struct PointLight {
+    pub position: [f32; 3],
+    /// Radiant intensity (W/sr) per channel: power / (4 pi) x colour.
+    pub intensity: [f32; 3],
+    /// 1/d^2 falloff; false: the paper's constant falloff (as if every pixel were 1 m away).
+    pub inverse_square: bool,
+}
+
+pub struct Lighting<'a> {
+    /// (k) per-channel SH weights shared by every pixel: suns (E Y_i(l)) plus environments (L_i).
+    pub uniform: &'a [[f32; 3]],
+    pub points: &'a [PointLight],
+    /// Radiance SH (k) that background pixels show in their direction; None: black.
+    pub background: Option<&'a [[f32; 3]]>,
+}
+
+/// Weights folded for one relight; shared by both code paths so they agree to the bit.
+pub(crate) struct Folded {
+    /// Per map, per channel: weight of the raw value (byte or half).
+    pub uniform: Vec<[f32; 3]>,
+    pub base: [f32; 3],
+    /// Per point light: (light, per-map raw-value scale x intensity, per-map offset x intensity).
+    pub points: Vec<(PointLight, Vec<[f32; 3]>, Vec<[f32; 3]>)>,
+}
+
+impl Relighter {
+    /// `maps`: k planes of H*W*3; `scale`/`offset`: k per-channel triples (8-bit maps; ignored
+    /// for float16); `position`: H*W; `hit`: H*W; `rotation`: the viewpoint's frame.
+    #[allow(clippy::too_many_arguments)]
+    pub fn new(width: usize, height: usize, coeffs: usize, maps: Maps, scale: Vec<[f32; 3]>, offset: Vec<[f32; 3]>,
+               position: &[[f32; 3]], hit: Vec<bool>, rotation: Rotation) -> Result<Relighter> {
+        let n = width * height;
+        if width == 0 || height == 0 {
+            return Err(Error::invalid("the panorama is empty"));
+        }
+        if !matches!(coeffs, 1 | 4 | 9 | 16 | 25) {
+            return Err(Error::invalid(format!("relighting takes 1, 4, 9, 16 or 25 coefficients, got {coeffs}")));
+        }
+        let len = match &maps {
+            Maps::U8(m) => m.len(),
+            Maps::F16(m) => m.len(),
+        };
+        if len != coeffs * n * 3 || position.len() != n || hit.len() != n {
+            return Err(Error::invalid("maps, positions and mask do not match the panorama's size"));
+        }
+        if matches!(maps, Maps::U8(_)) && (scale.len() != coeffs || offset.len() != coeffs) {
+            return Err(Error::invalid(format!("8-bit maps need {coeffs} scales and offsets")));
+        }
+        let plane = |a: usize| position.iter().map(|p| p[a]).collect::<Vec<f32>>();
+        Ok(Relighter { width, height, coeffs, maps, scale, offset, position: [plane(0), plane(1), plane(2)], hit, rotation })
+    }
+
+    /// Bytes the kernel reads per relight (maps, plus positions when point lights are on).
+    pub fn bytes_read(&self, points: bool) -> usize {
+        let maps = match &self.maps {
+            Maps::U8(m) => m.len(),
+            Maps::F16(m) => 2 * m.len(),
+        };
+        maps + if points { 12 * self.width * self.height } else { 0 }
+    }
+
+    /// Whether the AVX2 kernel runs on this CPU.
+    pub fn simd_available() -> bool {
+        #[cfg(target_arch = "x86_64")]
+        {
+            std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("f16c")
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        {
+            false
+        }
+    }
+
+    /// Radiance (H*W*3, row 0 at the top) into `out`; `simd` false forces the portable code.
+    pub fn relight(&self, lighting: &Lighting, out: &mut [f32], simd: bool) -> Result<()> {
+        let k = self.coeffs;
+        if out.len() != self.width * self.height * 3 {
+            return Err(Error::invalid("the output does not match the panorama's size"));
+        }
+        if lighting.uniform.len() != k || lighting.background.is_some_and(|b| b.len() != k) {
+            return Err(Error::invalid(format!("lighting must have {k} SH coefficients")));
+        }
+        let all = lighting.uniform.iter().chain(lighting.background.unwrap_or(&[])).flatten();
+        let lamps = lighting.points.iter().flat_map(|p| p.position.iter().chain(&p.intensity));
+        if all.chain(lamps).any(|v| !v.is_finite()) {
+            return Err(Error::invalid("lighting must be finite"));
+        }
+        let folded = self.fold(lighting);
+        let simd = simd && Self::simd_available();
+        let basis = ShBasis::new((k as f64).sqrt() as usize)?;
+        let (cols, rows) = (directions::columns(self.width), directions::rows(self.height));
+        let w3 = self.width * 3;
+        out.par_chunks_mut(w3).enumerate().for_each(|(r, row)| {
+            self.row(r, &folded, row, simd);
+            self.background(r, lighting.background, &basis, &rows, &cols, row);
+        });
+        Ok(())
+    }
+
+    fn fold(&self, lighting: &Lighting) -> Folded {
+        let k = self.coeffs;
+        let (scale, offset): (Vec<[f32; 3]>, Vec<[f32; 3]>) = match self.maps {
+            Maps::U8(_) => (self.scale.iter().map(|s| s.map(|v| v / 255.0)).collect(), self.offset.clone()),
+            Maps::F16(_) => (vec![[1.0; 3]; k], vec![[0.0; 3]; k]),
+        };
+        let times = |a: &[f32; 3], b: &[f32; 3]| [a[0] * b[0], a[1] * b[1], a[2] * b[2]];
+        let uniform = (0..k).map(|i| times(&lighting.uniform[i], &scale[i])).collect();
+        let mut base = [0.0f32; 3];
+        for i in 0..k {
+            for c in 0..3 {
+                base[c] += lighting.uniform[i][c] * offset[i][c];
+            }
+        }
+        let points = lighting
+            .points
+            .iter()
+            .map(|p| {
+                (*p, scale.iter().map(|s| times(s, &p.intensity)).collect(), offset.iter().map(|o| times(o, &p.intensity)).collect())
+            })
+            .collect();
+        Folded { uniform, base, points }
+    }
+
+    /// One row: AVX2 on whole blocks of 8 pixels when asked, the portable code elsewhere.
+    fn row(&self, r: usize, folded: &Folded, row: &mut [f32], simd: bool) {
+        let mut done = 0;
+        #[cfg(target_arch = "x86_64")]
+        if simd {
+            let blocks = self.width / LANES;
+            // SAFETY: `simd` is only true when the CPU has AVX2 and F16C (`simd_available`).
+            unsafe { super::relight_avx2::row(self, r, folded, row, blocks) };
+            done = blocks * LANES;
+        }
+        let _ = simd;
+        let mut p = done;
+        while p < self.width {
+            let lanes = (self.width - p).min(LANES);
+            self.block_portable(r, p, lanes, folded, &mut row[p * 3..(p + lanes) * 3]);
+            p += lanes;
+        }
+    }
+
+    #[inline(always)]
+    pub(crate) fn raw(&self, i: usize, e: usize) -> f32 {
+        match &self.maps {
+            Maps::U8(m) => m[i * self.width * self.height * 3 + e] as f32,
+            Maps::F16(m) => half::to_f32(m[i * self.width * self.height * 3 + e]),
+        }
+    }
+
+    pub(crate) fn maps(&self) -> &Maps {
+        &self.maps
+    }
+
+    /// The pixels p .. p + lanes of row r (out: their 3 * lanes values).
+    fn block_portable(&self, r: usize, p: usize, lanes: usize, folded: &Folded, out: &mut [f32]) {
+        let k = self.coeffs;
+        let first = (r * self.width + p) * 3;
+        for (e, value) in out.iter_mut().enumerate() {
+            let c = e % 3;
+            let mut acc = folded.base[c];
+            for i in 0..k {
+                acc = acc + folded.uniform[i][c] * self.raw(i, first + e);
+            }
+            *value = acc;
+        }
+        let mut t = [[0.0f32; LANES]; 25];
+        let mut offsets = [0.0f32; 3 * LANES];
+        for (light, ws, wo) in &folded.points {
+            self.point_lanes(r, p, lanes, light, wo, &mut t, &mut offsets);
+            for (e, value) in out.iter_mut().enumerate() {
+                let (j, c) = (e / 3, e % 3);
+                let mut acc = 0.0f32;
+                for i in 0..k {
+                    acc = acc + (t[i][j] * ws[i][c]) * self.raw(i, first + e);
+                }
+                *value = *value + (acc + offsets[e]);
+            }
+        }
+    }
+
+    /// For a point light and up to 8 pixels: t[i][j] = f(d_j) Y_i(l_j) and the offsets' part,
+    /// offsets[3 j + c] = sum_i t[i][j] wo[i][c]. Lanes past `lanes` repeat the last pixel.
+    #[inline(always)]
+    pub(crate) fn point_lanes(&self, r: usize, p: usize, lanes: usize, light: &PointLight, wo: &[[f32; 3]],
+                              t: &mut [Lanes; 25], offsets: &mut [f32; 3 * LANES]) {
+        let first = r * self.width + p;
+        let pick = |plane: &Vec<f32>| -> Lanes { std::array::from_fn(|j| plane[first + j.min(lanes - 1)]) };
+        let (px, py, pz) = (pick(&self.position[0]), pick(&self.position[1]), pick(&self.position[2]));
+        let (mut x, mut y, mut z, mut f) = ([0.0f32; LANES], [0.0f32; LANES], [0.0f32; LANES], [0.0f32; LANES]);
+        for j in 0..LANES {
+            let (lx, ly, lz) = (light.position[0] - px[j], light.position[1] - py[j], light.position[2] - pz[j]);
+            // A light on the surface itself would divide by zero: keep it a micrometre away.
+            let d2 = (lx * lx + ly * ly + lz * lz).max(1e-12);
+            let inv = 1.0 / d2.sqrt();
+            x[j] = lx * inv;
+            y[j] = ly * inv;
+            z[j] = lz * inv;
+            f[j] = if light.inverse_square { 1.0 / d2 } else { 1.0 };
+        }
+        let mut y_all = [[0.0f32; LANES]; 25];
+        sh_lanes::eval(&x, &y, &z, &mut y_all);
+        let k = self.coeffs;
+        for i in 0..k {
+            for j in 0..LANES {
+                t[i][j] = y_all[i][j] * f[j];
+            }
+        }
+        for (e, o) in offsets.iter_mut().enumerate() {
+            let (j, c) = (e / 3, e % 3);
+            let mut acc = 0.0f32;
+            for i in 0..k {
+                acc = acc + t[i][j] * wo[i][c];
+            }
+            *o = acc;
+        }
+    }
+
+    /// Background pixels show `background` (radiance SH) in their direction, or black.
+    fn background(&self, r: usize, background: Option<&[[f32; 3]]>, basis: &ShBasis, rows: &[(f64, f64)],
+                  cols: &[(f64, f64)], row: &mut [f32]) {
+        let mut y = [0.0f32; 25];
+        for c in 0..self.width {
+            if self.hit[r * self.width + c] {
+                continue;
+            }
+            let value = match background {
+                None => [0.0; 3],
+                Some(sh) => {
+                    let d = directions::direction(&self.rotation, rows[r], cols[c]).map(|v| v as f32);
+                    basis.eval(d, &mut y);
+                    let mut v = [0.0f32; 3];
+                    for (i, l) in sh.iter().enumerate() {
+                        for ch in 0..3 {
+                            v[ch] += y[i] * l[ch];
+                        }
+                    }
+                    v
+                }
+            };
+            row[c * 3..c * 3 + 3].copy_from_slice(&value);
+        }
+    }
+}
