@@ -29,6 +29,7 @@ import numpy as np
 import pytest
 
 import hemishadow
+import hemishadow.panorama as hp
 from hemishadow.sh import fibonacci_directions, rotate_sh, rotation_matrix
 
 PIL = pytest.importorskip("PIL.Image")
@@ -62,8 +63,8 @@ def directions(width, height):
 
 def room(width, height, bands, rotation, origin):
     """A box room (half sizes 3, 2.5, 2) seen from `origin`: coefficients (H, W, k, 3) of
-    albedo * V * max(0, n.w) / pi with an occluder per pixel, positions, the hit mask (a window in the +X wall
-    is background)."""
+    albedo * V * max(0, n.w) / pi with an occluder per pixel, positions, normals, the hit mask (a window in the
+    +X wall is background)."""
     half = np.array([3.0, 2.5, 2.0])
     d = directions(width, height) @ np.asarray(rotation).T
     with np.errstate(divide="ignore"):
@@ -85,7 +86,7 @@ def room(width, height, bands, rotation, origin):
     transfer = (cosine / np.pi) @ y * (4 * np.pi / len(w))  # (H*W, k), white
     coefficients = transfer[:, :, None] * albedo.reshape(-1, 1, 3)
     coefficients = coefficients.reshape(height, width, bands * bands, 3) * hit[..., None, None]
-    return coefficients, position * hit[..., None], hit
+    return coefficients, position * hit[..., None], normal * hit[..., None], hit
 
 
 def add_gamma_chunk(path: pathlib.Path, gamma: float = 1.0) -> None:
@@ -97,29 +98,20 @@ def add_gamma_chunk(path: pathlib.Path, gamma: float = 1.0) -> None:
     path.write_bytes(data[:end_of_ihdr] + chunk + data[end_of_ihdr:])
 
 
-def write_compact(folder: pathlib.Path, coefficients, position, hit, rotation, origin, gamma_chunk=False):
-    """The contract's compact form, written here independently of the engine's exporter. gamma_chunk: the
-    maps carry a gAMA chunk of 1.0 (not the contract's form), which the viewer must ignore as well."""
-    height, width, k, _ = coefficients.shape
-    folder.mkdir(parents=True)
-    maps = []
-    for i in range(k):
-        c = coefficients[:, :, i]
-        lo, hi = c.min(axis=(0, 1)), c.max(axis=(0, 1))
-        scale = np.where(hi > lo, hi - lo, 1.0)
-        data = np.round((c - lo) / scale * 255).astype(np.uint8)
-        PIL.fromarray(data, "RGB").save(folder / f"sh{i:02d}.png")
-        if gamma_chunk:
-            add_gamma_chunk(folder / f"sh{i:02d}.png")
-        maps.append({"file": f"sh{i:02d}.png", "scale": scale.tolist(), "offset": lo.tolist()})
-    PIL.fromarray((hit * 255).astype(np.uint8), "L").save(folder / "alpha.png")
-    position.astype("<f4").tofile(folder / "position.f32")
-    meta = {"format": "hemishadow-panorama", "version": 1, "width": width, "height": height,
-            "bands": int(round(np.sqrt(k))), "coefficients": k, "origin": list(origin),
-            "rotation": np.asarray(rotation).tolist(), "maps": maps,
-            "position": {"file": "position.f32"}, "alpha": {"file": "alpha.png"}}
-    (folder / "panorama.json").write_text(json.dumps(meta))
-    return folder / "panorama.json"
+def save_compact(folder: pathlib.Path, width, height, bands, rotation, origin, gamma_chunk=False):
+    """The room's panorama in the compact form, written by the engine's exporter (Panorama.save). gamma_chunk:
+    the maps get a gAMA chunk of 1.0 (not what the exporter writes), which the viewer must ignore as well."""
+    coefficients, position, normal, hit = room(width, height, bands, rotation, origin)
+    depth = np.where(hit, np.linalg.norm(position - origin, axis=-1), np.inf)
+    panorama = hp.Panorama(coefficients=coefficients.astype(np.float32), position=position.astype(np.float32),
+                           normal=normal.astype(np.float32), depth=depth.astype(np.float32),
+                           alpha=hit.astype(np.float32), origin=origin, rotation=rotation, bands=bands)
+    path = folder / "panorama.json"
+    panorama.save(path)
+    if gamma_chunk:
+        for png in folder.glob("sh*.png"):
+            add_gamma_chunk(png)
+    return path
 
 
 def dequantized(path: pathlib.Path):
@@ -132,12 +124,21 @@ def dequantized(path: pathlib.Path):
     return np.stack(maps, axis=2), position, hit, np.asarray(meta["rotation"])
 
 
-# --- the reference: the relight's sums in numpy -------------------------------------------------------------
+# --- the references: the engine's relight, and its sums written out in numpy ---------------------------------
 
-def reference_radiance(path, suns=(), points=(), env=None, env_rotation_deg=0.0):
-    """Linear radiance (H, W, 3): sum_i c_i (sum of the lights' SH weights) per surface pixel, the environment
-    seen in the pixel's direction for background pixels. env: (k, 3) lighting SH; env_rotation_deg turns it
-    about Z as the World's Mapping node does (the image is looked up at Rz d)."""
+def native_radiance(path, suns=(), points=(), env=None, env_rotation_deg=0.0, exposure=0.0):
+    """hemishadow.panorama.relight of the compact panorama (its 8-bit maps) under the lights."""
+    lights = [hp.Sun(d, s) for d, s in suns] + [hp.Point(p, w) for p, w in points]
+    if env is not None:
+        lights.append(hp.Environment(env, rotation=np.radians(env_rotation_deg)))
+    return hp.relight(hp.Panorama.load(path), lights, exposure=exposure)
+
+
+def numpy_radiance(path, suns=(), points=(), env=None, env_rotation_deg=0.0):
+    """The same sums read from the files with Pillow and written out in numpy (float64), from the contract:
+    sum_i c_i (sum of the lights' SH weights) per surface pixel, the environment seen in the pixel's direction
+    for background pixels. env: (k, 3) lighting SH; env_rotation_deg turns it about Z as the World's Mapping
+    node does (the image is looked up at Rz d)."""
     c, position, hit, rotation = dequantized(path)
     height, width, k, _ = c.shape
     bands = int(round(np.sqrt(k)))
@@ -195,8 +196,8 @@ def served(tmp_path_factory):
     root = tmp_path_factory.mktemp("panoweb")
     origin = np.array([0.2, -0.1, 0.3])
     turn = rotation_matrix((0, 0, 1), np.radians(30))
-    big = write_compact(root / "p25", *room(128, 64, 5, turn, origin), turn, origin)
-    small = write_compact(root / "p16", *room(96, 48, 4, np.eye(3), origin), np.eye(3), origin, gamma_chunk=True)
+    big = save_compact(root / "p25", 128, 64, 5, turn, origin)
+    small = save_compact(root / "p16", 96, 48, 4, np.eye(3), origin, gamma_chunk=True)
     env = np.zeros((25, 3))
     env[0] = [1.6, 1.8, 2.4]  # a sky brighter above, a warm glow towards +X
     env[2] = [0.9, 1.0, 1.3]
@@ -228,12 +229,23 @@ def compare(base: str, name, query: dict, reference, tmp_path):
     return within, int(error.max())
 
 
+SUN, POINT, LONE_POINT = ((0.4, -0.6, 0.7), 2.5), ((1.2, 0.8, -0.5), 150.0), ((-1.5, 1.0, 0.8), 300.0)
+
+
+def test_the_native_relight_does_the_sums_of_the_contract(served):
+    """The reference the viewer is held to (hemishadow.panorama.relight) against the sums written out here
+    from the contract, on the same files: the two test pictures, in float."""
+    for path, lights in ((served["big"], dict(suns=[SUN], points=[POINT], env=served["env"], env_rotation_deg=40)),
+                         (served["small"], dict(points=[LONE_POINT]))):
+        native, ours = native_radiance(path, **lights), numpy_radiance(path, **lights)
+        assert np.abs(native - ours).max() <= 1e-4 * max(1.0, np.abs(ours).max()), path
+
+
 def test_sun_point_environment_and_exposure_match_the_relight(served, tmp_path):
     """All the sums at once: a sun, a point lamp, an environment turned about Z, exposure; a turned viewpoint
     (background directions) and 25 coefficients (every SH polynomial of the shader)."""
-    sun, point = ((0.4, -0.6, 0.7), 2.5), ((1.2, 0.8, -0.5), 150.0)
-    radiance = reference_radiance(served["big"], suns=[sun], points=[point], env=served["env"], env_rotation_deg=40)
-    reference = standard_view(radiance, exposure=-0.5)
+    reference = standard_view(native_radiance(served["big"], suns=[SUN], points=[POINT], env=served["env"],
+                                              env_rotation_deg=40, exposure=-0.5))
     assert 0.2 < np.mean(reference) / 255 < 0.8 and np.mean(reference == 255) < 0.05  # a picture, not clipped
     compare(served["bases"]["big"], "all", {"sun": "0.4,-0.6,0.7,2.5",
                             "point": "1.2,0.8,-0.5,150", "env": "sky,1", "envrot": "40", "exposure": "-0.5"},
@@ -243,8 +255,7 @@ def test_sun_point_environment_and_exposure_match_the_relight(served, tmp_path):
 def test_point_light_alone_matches_the_relight(served, tmp_path):
     """A point lamp alone, 1/d^2 from the float32 position map, 16 coefficients, background black; the maps
     carry a gAMA chunk that must change nothing (they are data)."""
-    point = ((-1.5, 1.0, 0.8), 300.0)
-    reference = standard_view(reference_radiance(served["small"], points=[point]))
+    reference = standard_view(native_radiance(served["small"], points=[LONE_POINT]))
     compare(served["bases"]["small"], "point", {"point": "-1.5,1,0.8,300"}, reference, tmp_path)
 
 
