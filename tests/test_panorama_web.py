@@ -98,14 +98,19 @@ def add_gamma_chunk(path: pathlib.Path, gamma: float = 1.0) -> None:
     path.write_bytes(data[:end_of_ihdr] + chunk + data[end_of_ihdr:])
 
 
-def save_compact(folder: pathlib.Path, width, height, bands, rotation, origin, gamma_chunk=False):
+def save_compact(folder: pathlib.Path, width, height, bands, rotation, origin, gamma_chunk=False, bounce=False):
     """The room's panorama in the compact form, written by the engine's exporter (Panorama.save). gamma_chunk:
-    the maps get a gAMA chunk of 1.0 (not what the exporter writes), which the viewer must ignore as well."""
+    the maps get a gAMA chunk of 1.0 (not what the exporter writes), which the viewer must ignore as well.
+    bounce: a bounce term (a smooth colour over the surfaces)."""
     coefficients, position, normal, hit = room(width, height, bands, rotation, origin)
     depth = np.where(hit, np.linalg.norm(position - origin, axis=-1), np.inf)
+    extra = None
+    if bounce:
+        extra = (0.08 + 0.06 * np.sin(position[..., [1, 2, 0]] * [1.5, 2.0, 1.0])) * hit[..., None]
     panorama = hp.Panorama(coefficients=coefficients.astype(np.float32), position=position.astype(np.float32),
                            normal=normal.astype(np.float32), depth=depth.astype(np.float32),
-                           alpha=hit.astype(np.float32), origin=origin, rotation=rotation, bands=bands)
+                           alpha=hit.astype(np.float32), origin=origin, rotation=rotation, bands=bands,
+                           bounce=None if extra is None else extra.astype(np.float32))
     path = folder / "panorama.json"
     panorama.save(path)
     if gamma_chunk:
@@ -126,15 +131,17 @@ def dequantized(path: pathlib.Path):
 
 # --- the references: the engine's relight, and its sums written out in numpy ---------------------------------
 
-def native_radiance(path, suns=(), points=(), env=None, env_rotation_deg=0.0, exposure=0.0):
-    """hemishadow.panorama.relight of the compact panorama (its 8-bit maps) under the lights."""
-    lights = [hp.Sun(d, s) for d, s in suns] + [hp.Point(p, w) for p, w in points]
+def native_radiance(path, suns=(), points=(), env=None, env_rotation_deg=0.0, bounce=False, exposure=0.0):
+    """hemishadow.panorama.relight of the compact panorama (its 8-bit maps) under the lights. points:
+    (position, power[, falloff])."""
+    lights = [hp.Sun(d, s) for d, s in suns] + [hp.Point(*p) if len(p) < 3 else hp.Point(p[0], p[1], falloff=p[2])
+                                                 for p in points]
     if env is not None:
         lights.append(hp.Environment(env, rotation=np.radians(env_rotation_deg)))
-    return hp.relight(hp.Panorama.load(path), lights, exposure=exposure)
+    return hp.relight(hp.Panorama.load(path), lights, exposure=exposure, bounce=bounce)
 
 
-def numpy_radiance(path, suns=(), points=(), env=None, env_rotation_deg=0.0):
+def numpy_radiance(path, suns=(), points=(), env=None, env_rotation_deg=0.0, bounce=False):
     """The same sums read from the files with Pillow and written out in numpy (float64), from the contract:
     sum_i c_i (sum of the lights' SH weights) per surface pixel, the environment seen in the pixel's direction
     for background pixels. env: (k, 3) lighting SH; env_rotation_deg turns it about Z as the World's Mapping
@@ -152,15 +159,20 @@ def numpy_radiance(path, suns=(), points=(), env=None, env_rotation_deg=0.0):
         env_sh = rotate_sh(np.asarray(env, np.float64)[:k], turn).astype(np.float64)
         weights += env_sh
     per_pixel = np.broadcast_to(weights, (height, width, k, 3)).copy()
-    for light, power in points:
+    for light, power, *falloff in points:
         to_light = np.asarray(light) - position
         d2 = np.sum(to_light ** 2, axis=-1)
         y = basis(to_light / np.sqrt(d2)[..., None]).reshape(height, width, k)
-        per_pixel += (power / (4 * np.pi) / d2)[..., None, None] * y[..., None]
+        falloff = np.ones_like(d2) if falloff == ["constant"] else d2  # constant: as if 1 m away
+        per_pixel += (power / (4 * np.pi) / falloff)[..., None, None] * y[..., None]
     surface = np.sum(c * per_pixel, axis=2)
     world = directions(width, height) @ rotation.T
     background = (basis(world) @ env_sh).reshape(height, width, 3)
-    return np.where(hit[..., None], surface, background)
+    radiance = np.where(hit[..., None], surface, background)
+    if bounce:  # added to every pixel, as relight(bounce=True) adds it
+        meta = json.loads(path.read_text())["bounce"]
+        radiance += meta["offset"] + np.asarray(meta["scale"]) * np.asarray(PIL.open(path.parent / meta["file"])) / 255
+    return radiance
 
 
 def standard_view(radiance, exposure=0.0):
@@ -196,7 +208,7 @@ def served(tmp_path_factory):
     root = tmp_path_factory.mktemp("panoweb")
     origin = np.array([0.2, -0.1, 0.3])
     turn = rotation_matrix((0, 0, 1), np.radians(30))
-    big = save_compact(root / "p25", 128, 64, 5, turn, origin)
+    big = save_compact(root / "p25", 128, 64, 5, turn, origin, bounce=True)
     small = save_compact(root / "p16", 96, 48, 4, np.eye(3), origin, gamma_chunk=True)
     env = np.zeros((25, 3))
     env[0] = [1.6, 1.8, 2.4]  # a sky brighter above, a warm glow towards +X
@@ -230,25 +242,26 @@ def compare(base: str, name, query: dict, reference, tmp_path):
 
 
 SUN, POINT, LONE_POINT = ((0.4, -0.6, 0.7), 2.5), ((1.2, 0.8, -0.5), 150.0), ((-1.5, 1.0, 0.8), 300.0)
+CONSTANT_POINT = ((-2.0, -1.5, 1.2), 8.0, "constant")
+ALL = dict(suns=[SUN], points=[POINT, CONSTANT_POINT], env=None, env_rotation_deg=40, bounce=True)
 
 
 def test_the_native_relight_does_the_sums_of_the_contract(served):
     """The reference the viewer is held to (hemishadow.panorama.relight) against the sums written out here
     from the contract, on the same files: the two test pictures, in float."""
-    for path, lights in ((served["big"], dict(suns=[SUN], points=[POINT], env=served["env"], env_rotation_deg=40)),
-                         (served["small"], dict(points=[LONE_POINT]))):
+    for path, lights in ((served["big"], dict(ALL, env=served["env"])), (served["small"], dict(points=[LONE_POINT]))):
         native, ours = native_radiance(path, **lights), numpy_radiance(path, **lights)
         assert np.abs(native - ours).max() <= 1e-4 * max(1.0, np.abs(ours).max()), path
 
 
 def test_sun_point_environment_and_exposure_match_the_relight(served, tmp_path):
-    """All the sums at once: a sun, a point lamp, an environment turned about Z, exposure; a turned viewpoint
-    (background directions) and 25 coefficients (every SH polynomial of the shader)."""
-    reference = standard_view(native_radiance(served["big"], suns=[SUN], points=[POINT], env=served["env"],
-                                              env_rotation_deg=40, exposure=-0.5))
+    """All the sums at once: a sun, a point lamp, a point lamp without falloff, an environment turned about Z,
+    the bounce term, exposure; a turned viewpoint (background directions) and 25 coefficients (every SH
+    polynomial of the shader)."""
+    reference = standard_view(native_radiance(served["big"], **dict(ALL, env=served["env"]), exposure=-0.5))
     assert 0.2 < np.mean(reference) / 255 < 0.8 and np.mean(reference == 255) < 0.05  # a picture, not clipped
-    compare(served["bases"]["big"], "all", {"sun": "0.4,-0.6,0.7,2.5",
-                            "point": "1.2,0.8,-0.5,150", "env": "sky,1", "envrot": "40", "exposure": "-0.5"},
+    compare(served["bases"]["big"], "all", {"sun": "0.4,-0.6,0.7,2.5", "point": ["1.2,0.8,-0.5,150", "-2,-1.5,1.2,8,constant"],
+                                            "env": "sky,1", "envrot": "40", "bounce": "1", "exposure": "-0.5"},
             reference, tmp_path)
 
 

@@ -1,8 +1,10 @@
 // The relight on the GPU (WebGL2): per pixel the same sums as hemishadow.panorama.relight.
 //   radiance = sum_i value_i * (w_i + sum_points I / d^2 * Y_i(to the point))     (a surface pixel)
 //   radiance = sum_i E_i * Y_i(R d)                                               (a background pixel)
+//   + the baked bounce term when asked (every pixel, as the native relight adds it)
 // value_i = offset_i + scale_i * byte / 255 (map i), w_i the per-coefficient weights of the suns and the
-// environment (the same for every pixel), I the point's intensity P / (4 pi) in W/sr, E the environment's
+// environment (the same for every pixel), I the point's intensity P / (4 pi) in W/sr (d^2 = 1 with the
+// "constant" falloff, Wong et al.'s option: every pixel lit as if the lamp were 1 m away), E the environment's
 // SH, R the viewpoint's rotation. Then exposure and Blender's Standard view transform (clip, sRGB curve).
 // Every texture is read with texelFetch, one texel per canvas pixel: no filtering, no colour conversion.
 
@@ -26,6 +28,10 @@ precision highp sampler2DArray;
 uniform sampler2DArray maps;
 uniform sampler2D alpha;
 uniform sampler2D position;
+uniform sampler2D bounce;
+uniform bool bounceOn;
+uniform vec3 bounceScale;
+uniform vec3 bounceOffset;
 uniform int count;
 uniform ivec2 size;
 uniform vec3 scale[K];
@@ -35,6 +41,7 @@ uniform vec3 environment[K];
 uniform int points;
 uniform vec3 pointPosition[POINTS];
 uniform vec3 pointIntensity[POINTS];
+uniform bool pointInverseSquare[POINTS];
 uniform mat3 rotation;
 uniform float exposure;
 out vec4 color;
@@ -65,7 +72,7 @@ vec3 surface(ivec2 texel) {
     float d2 = dot(toLight, toLight);
     if (!(d2 > 0.0)) continue;
     basis(toLight * inversesqrt(d2), y);
-    vec3 irradiance = pointIntensity[j] / d2;
+    vec3 irradiance = pointInverseSquare[j] ? pointIntensity[j] / d2 : pointIntensity[j];
     for (int i = 0; i < count; i++) w[i] += irradiance * y[i];
   }
   vec3 sum = vec3(0.0);
@@ -97,6 +104,7 @@ void main() {
   texel.y = size.y - 1 - texel.y;  // row 0 is the top row, as in the files
   bool hit = texelFetch(alpha, texel, 0).r > 0.5;
   vec3 radiance = hit ? surface(texel) : background(texel);
+  if (bounceOn) radiance += bounceOffset + bounceScale * texelFetch(bounce, texel, 0).rgb;
   color = vec4(standardView(radiance * exposure), 1.0);
 }`;
 
@@ -146,7 +154,7 @@ export class Relighter {
   }
 
   // panorama: {width, height, count, scale, offset (count x [r,g,b]), maps (ImageBitmaps), alpha (ImageBitmap),
-  // position (Float32Array, height x width x 3), rotation (3x3 rows)}
+  // position (Float32Array, height x width x 3), rotation (3x3 rows), bounce ({bitmap, scale, offset} or null)}
   upload(panorama) {
     const { gl } = this;
     const { width, height, count } = panorama;
@@ -155,7 +163,7 @@ export class Relighter {
     this.canvas.width = width;
     this.canvas.height = height;
     gl.viewport(0, 0, width, height);
-    gl.deleteTexture(this.maps); gl.deleteTexture(this.alpha); gl.deleteTexture(this.position);
+    for (const t of [this.maps, this.alpha, this.position, this.bounce]) gl.deleteTexture(t ?? null);
     this.maps = gl.createTexture();
     gl.activeTexture(gl.TEXTURE0);
     gl.bindTexture(gl.TEXTURE_2D_ARRAY, this.maps);
@@ -175,11 +183,21 @@ export class Relighter {
     gl.texStorage2D(gl.TEXTURE_2D, 1, gl.RGB32F, width, height);
     gl.texSubImage2D(gl.TEXTURE_2D, 0, 0, 0, width, height, gl.RGB, gl.FLOAT, panorama.position);
     nearest(gl, gl.TEXTURE_2D);
+    this.bounce = gl.createTexture();  // 1 x 1 black when the panorama has no bounce term
+    gl.activeTexture(gl.TEXTURE3);
+    gl.bindTexture(gl.TEXTURE_2D, this.bounce);
+    const b = panorama.bounce;
+    gl.texStorage2D(gl.TEXTURE_2D, 1, gl.RGBA8, b ? width : 1, b ? height : 1);
+    if (b) gl.texSubImage2D(gl.TEXTURE_2D, 0, 0, 0, width, height, gl.RGBA, gl.UNSIGNED_BYTE, b.bitmap);
+    nearest(gl, gl.TEXTURE_2D);
     gl.useProgram(this.program);
     const u = this.uniforms;
     gl.uniform1i(u.maps, 0);
     gl.uniform1i(u.alpha, 1);
     gl.uniform1i(u.position, 2);
+    gl.uniform1i(u.bounce, 3);
+    gl.uniform3fv(u.bounceScale, b ? b.scale : [0, 0, 0]);
+    gl.uniform3fv(u.bounceOffset, b ? b.offset : [0, 0, 0]);
     gl.uniform1i(u.count, count);
     gl.uniform2i(u.size, width, height);
     gl.uniform3fv(u.scale, panorama.scale.flat());
@@ -205,7 +223,8 @@ export class Relighter {
     return hits;  // row 0 = texture row 0 = the top row
   }
 
-  // lights: {weights, environment (count x [r,g,b]), points: [{position, intensity: [r,g,b] W/sr}], exposure (EV)}
+  // lights: {weights, environment (count x [r,g,b]), points: [{position, intensity: [r,g,b] W/sr, inverseSquare}],
+  // bounce (bool), exposure (EV)}
   draw(lights) {
     const { gl } = this;
     const u = this.uniforms;
@@ -218,7 +237,9 @@ export class Relighter {
     if (lights.points.length) {
       gl.uniform3fv(u.pointPosition, lights.points.flatMap((p) => p.position));
       gl.uniform3fv(u.pointIntensity, lights.points.flatMap((p) => p.intensity));
+      gl.uniform1iv(u.pointInverseSquare, lights.points.map((p) => (p.inverseSquare ? 1 : 0)));
     }
+    gl.uniform1i(u.bounceOn, lights.bounce ? 1 : 0);
     gl.uniform1f(u.exposure, Math.pow(2, lights.exposure));
     gl.drawArrays(gl.TRIANGLES, 0, 3);
   }

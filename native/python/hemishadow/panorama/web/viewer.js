@@ -5,9 +5,11 @@
 //   panorama=URL          the panorama's JSON (default panorama/panorama.json, where `hemishadow serve` puts it)
 //   environments=URL      the environments' SH (default environments.json, written by `hemishadow serve`)
 //   sun=X,Y,Z,STRENGTH    a sun: vector towards the light (world), irradiance in W/m^2; repeat for more
-//   point=X,Y,Z,POWER     a point lamp at X,Y,Z (world, m) of POWER W (Blender's: P / (4 pi) W/sr); repeatable
+//   point=X,Y,Z,POWER[,constant]  a point lamp at X,Y,Z (world, m) of POWER W (Blender's: P / (4 pi) W/sr), 1/d^2
+//                         falloff, or none with ",constant" (lit as if 1 m away); repeatable
 //   env=NAME[,STRENGTH]   an environment by name (the list in the environments' JSON)
 //   envrot=DEGREES        the environment turned about Z as the World's Mapping node turns it
+//   bounce=1              add the panorama's baked bounce term (when it has one)
 //   exposure=EV           2^EV times the radiance before the Standard view transform
 //   ui=0                  the picture alone at one canvas pixel per screen pixel (screenshots)
 
@@ -32,8 +34,13 @@ function stateFromUrl() {
     return { direction: normalize([x, y, z]), strength };
   });
   const points = params.getAll("point").map((s) => {
-    const [x, y, z, power] = numbers(s, 4, "point");
-    return { position: [x, y, z], power };
+    const parts = s.split(",");
+    const falloff = parts.length === 5 ? parts.pop() : "inverse_square";
+    if (falloff !== "inverse_square" && falloff !== "constant") {
+      throw new Error(`point=${s}: the falloff is inverse_square or constant, not ${falloff}`);
+    }
+    const [x, y, z, power] = numbers(parts.join(","), 4, "point");
+    return { position: [x, y, z], power, falloff };
   });
   if (points.length > MAX_POINTS) throw new Error(`at most ${MAX_POINTS} point lights`);
   let env = { name: "", strength: 1 };
@@ -45,11 +52,12 @@ function stateFromUrl() {
   return {
     suns: suns.length ? suns : [{ ...DEFAULT_SUN }],
     sunOn: suns.length > 0 || !lit,
-    points: points.length ? points : [{ position: null, power: 100 }],  // null: at the viewpoint, once loaded
+    points: points.length ? points : [{ position: null, power: 100, falloff: "inverse_square" }],  // null: the viewpoint
     pointOn: points.length > 0,
     env,
     envRotation: params.has("envrot") ? numbers(params.get("envrot"), 1, "envrot")[0] : 0,
     exposure: params.has("exposure") ? numbers(params.get("exposure"), 1, "exposure")[0] : 0,
+    bounce: params.get("bounce") === "1",
   };
 }
 
@@ -95,8 +103,9 @@ async function loadPanorama(url) {
   if (position.length !== width * height * 3) {
     throw new Error(`${meta.position.file} holds ${position.length} floats, expected ${width * height * 3}`);
   }
+  const bounce = meta.bounce && { bitmap: await bitmap(at(meta.bounce.file)), scale: meta.bounce.scale, offset: meta.bounce.offset };
   return {
-    width, height, count, maps, alpha, position,
+    width, height, count, maps, alpha, position, bounce,
     scale: meta.maps.map((m) => m.scale), offset: meta.maps.map((m) => m.offset),
     origin: meta.origin || [0, 0, 0],
     rotation: meta.rotation || [[1, 0, 0], [0, 1, 0], [0, 0, 1]],
@@ -130,9 +139,9 @@ function lightsOf(state, environments, count) {
   }
   const points = (state.pointOn ? state.points : []).map((p) => {
     const intensity = p.power / (4 * Math.PI);
-    return { position: p.position, intensity: [intensity, intensity, intensity] };
+    return { position: p.position, intensity: [intensity, intensity, intensity], inverseSquare: p.falloff !== "constant" };
   });
-  return { weights, environment, points, exposure: state.exposure };
+  return { weights, environment, points, bounce: state.bounce, exposure: state.exposure };
 }
 
 function writeUrl(state) {
@@ -140,9 +149,14 @@ function writeUrl(state) {
   for (const key of ["panorama", "environments", "ui"]) if (params.has(key)) out.set(key, params.get(key));
   const fmt = (v) => +v.toFixed(4);
   if (state.sunOn) for (const s of state.suns) out.append("sun", [...s.direction, s.strength].map(fmt).join(","));
-  if (state.pointOn) for (const p of state.points) out.append("point", [...p.position, p.power].map(fmt).join(","));
+  if (state.pointOn) {
+    for (const p of state.points) {
+      out.append("point", [...p.position, p.power].map(fmt).join(",") + (p.falloff === "constant" ? ",constant" : ""));
+    }
+  }
   if (state.env.name) out.set("env", `${state.env.name},${fmt(state.env.strength)}`);
   if (state.envRotation) out.set("envrot", fmt(state.envRotation));
+  if (state.bounce) out.set("bounce", "1");
   if (state.exposure) out.set("exposure", fmt(state.exposure));
   history.replaceState(null, "", `?${out}`);
 }
@@ -157,6 +171,7 @@ function showState(state) {
   $("env-name").value = state.env.name;
   $("env-strength").value = state.env.strength;
   $("env-rotation").value = state.envRotation;
+  $("bounce").checked = state.bounce;
   $("exposure").value = state.exposure;
   $("exposure-value").textContent = `${state.exposure.toFixed(1)} EV`;
 }
@@ -170,6 +185,7 @@ function readControls(state) {
   state.points[0].power = num("point-power", state.points[0].power);
   state.env = { name: $("env-name").value, strength: num("env-strength", state.env.strength) };
   state.envRotation = num("env-rotation", state.envRotation);
+  state.bounce = $("bounce").checked;
   state.exposure = num("exposure", state.exposure);
 }
 
@@ -207,6 +223,8 @@ async function main() {
   const environmentsLoading = loadEnvironments(params.get("environments") || "environments.json");
   const panorama = await loadPanorama(params.get("panorama") || "panorama/panorama.json");
   const environments = state.env.name ? await environmentsLoading : [];
+  if (state.bounce && !panorama.bounce) throw new Error("bounce=1: this panorama has no bounce term");
+  $("bounce").disabled = !panorama.bounce;
   relighter.upload(panorama);
   state.points[0].position ??= panorama.origin.slice();
   const addEnvironments = (list) => {
