@@ -180,14 +180,6 @@ impl Relighter {
         }
     }
 
-    #[inline(always)]
-    pub(crate) fn raw(&self, i: usize, e: usize) -> f32 {
-        match &self.maps {
-            Maps::U8(m) => m[i * self.width * self.height * 3 + e] as f32,
-            Maps::F16(m) => half::to_f32(m[i * self.width * self.height * 3 + e]),
-        }
-    }
-
     pub(crate) fn maps(&self) -> &Maps {
         &self.maps
     }
@@ -196,11 +188,20 @@ impl Relighter {
     fn block_portable(&self, r: usize, p: usize, lanes: usize, folded: &Folded, out: &mut [f32]) {
         let k = self.coeffs;
         let first = (r * self.width + p) * 3;
+        let n = out.len();
+        let mut raw = [[0.0f32; 3 * LANES]; 25];
+        for (i, values) in raw.iter_mut().enumerate().take(k) {
+            let start = i * self.width * self.height * 3 + first;
+            match &self.maps {
+                Maps::U8(m) => values[..n].iter_mut().zip(&m[start..start + n]).for_each(|(v, b)| *v = *b as f32),
+                Maps::F16(m) => values[..n].iter_mut().zip(&m[start..start + n]).for_each(|(v, b)| *v = half::to_f32(*b)),
+            }
+        }
         for (e, value) in out.iter_mut().enumerate() {
             let c = e % 3;
             let mut acc = folded.base[c];
             for i in 0..k {
-                acc = acc + folded.uniform[i][c] * self.raw(i, first + e);
+                acc = acc + folded.uniform[i][c] * raw[i][e];
             }
             *value = acc;
         }
@@ -212,7 +213,7 @@ impl Relighter {
                 let (j, c) = (e / 3, e % 3);
                 let mut acc = 0.0f32;
                 for i in 0..k {
-                    acc = acc + (t[i][j] * ws[i][c]) * self.raw(i, first + e);
+                    acc = acc + (t[i][j] * ws[i][c]) * raw[i][e];
                 }
                 *value = *value + (acc + offsets[e]);
             }
@@ -225,9 +226,21 @@ impl Relighter {
     pub(crate) fn point_lanes(&self, r: usize, p: usize, lanes: usize, light: &PointLight, wo: &[[f32; 3]],
                               t: &mut [Lanes; 25], offsets: &mut [f32; 3 * LANES]) {
         let first = r * self.width + p;
-        let pick = |plane: &Vec<f32>| -> Lanes { std::array::from_fn(|j| plane[first + j.min(lanes - 1)]) };
-        let (px, py, pz) = (pick(&self.position[0]), pick(&self.position[1]), pick(&self.position[2]));
+        let (mut px, mut py, mut pz) = ([0.0f32; LANES], [0.0f32; LANES], [0.0f32; LANES]);
+        if lanes == LANES {
+            px.copy_from_slice(&self.position[0][first..first + LANES]);
+            py.copy_from_slice(&self.position[1][first..first + LANES]);
+            pz.copy_from_slice(&self.position[2][first..first + LANES]);
+        } else {
+            for j in 0..LANES {
+                let q = first + j.min(lanes - 1);
+                px[j] = self.position[0][q];
+                py[j] = self.position[1][q];
+                pz[j] = self.position[2][q];
+            }
+        }
         let (mut x, mut y, mut z, mut f) = ([0.0f32; LANES], [0.0f32; LANES], [0.0f32; LANES], [0.0f32; LANES]);
+        let inverse_square = if light.inverse_square { 1.0f32 } else { 0.0 };
         for j in 0..LANES {
             let (lx, ly, lz) = (light.position[0] - px[j], light.position[1] - py[j], light.position[2] - pz[j]);
             // A light on the surface itself would divide by zero: keep it a micrometre away.
@@ -236,23 +249,29 @@ impl Relighter {
             x[j] = lx * inv;
             y[j] = ly * inv;
             z[j] = lz * inv;
-            f[j] = if light.inverse_square { 1.0 / d2 } else { 1.0 };
+            f[j] = if inverse_square != 0.0 { 1.0 / d2 } else { 1.0 };
         }
-        let mut y_all = [[0.0f32; LANES]; 25];
-        sh_lanes::eval(&x, &y, &z, &mut y_all);
         let k = self.coeffs;
-        for i in 0..k {
+        sh_lanes::eval(&x, &y, &z, k, t);
+        for ti in t.iter_mut().take(k) {
             for j in 0..LANES {
-                t[i][j] = y_all[i][j] * f[j];
+                ti[j] = ti[j] * f[j];
             }
         }
-        for (e, o) in offsets.iter_mut().enumerate() {
-            let (j, c) = (e / 3, e % 3);
-            let mut acc = 0.0f32;
+        // The offsets' part per channel in lane order, then interleaved like the values.
+        let mut per_channel = [[0.0f32; LANES]; 3];
+        for (c, pc) in per_channel.iter_mut().enumerate() {
             for i in 0..k {
-                acc = acc + t[i][j] * wo[i][c];
+                let w = wo[i][c];
+                for j in 0..LANES {
+                    pc[j] = pc[j] + t[i][j] * w;
+                }
             }
-            *o = acc;
+        }
+        for j in 0..LANES {
+            for c in 0..3 {
+                offsets[3 * j + c] = per_channel[c][j];
+            }
         }
     }
 

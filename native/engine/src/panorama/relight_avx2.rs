@@ -11,27 +11,40 @@ use super::sh_lanes::LANES;
 /// Lane l of vector v holds value v * 8 + l, i.e. pixel (v * 8 + l) / 3.
 const SPREAD: [[i32; 8]; 3] = [[0, 0, 0, 1, 1, 1, 2, 2], [2, 3, 3, 3, 4, 4, 4, 5], [5, 5, 6, 6, 6, 7, 7, 7]];
 
-#[inline(always)]
+#[target_feature(enable = "avx2,f16c")]
+#[inline]
 unsafe fn pattern(w: &[f32; 3]) -> [__m256; 3] {
-    std::array::from_fn(|v| {
-        let values: [f32; 8] = std::array::from_fn(|l| w[(v * 8 + l) % 3]);
-        _mm256_loadu_ps(values.as_ptr())
-    })
+    let mut out = [_mm256_setzero_ps(); 3];
+    for (v, o) in out.iter_mut().enumerate() {
+        let mut values = [0.0f32; 8];
+        for (l, x) in values.iter_mut().enumerate() {
+            *x = w[(v * 8 + l) % 3];
+        }
+        *o = _mm256_loadu_ps(values.as_ptr());
+    }
+    out
 }
 
-/// The 24 raw values of map i from value index e (bytes or halves) as floats.
-#[inline(always)]
-unsafe fn load24(maps: &Maps, start: usize) -> [__m256; 3] {
-    match maps {
-        Maps::U8(m) => {
-            let p = m.as_ptr().add(start);
-            std::array::from_fn(|v| _mm256_cvtepi32_ps(_mm256_cvtepu8_epi32(_mm_loadl_epi64(p.add(8 * v) as *const __m128i))))
-        }
-        Maps::F16(m) => {
-            let p = m.as_ptr().add(start);
-            std::array::from_fn(|v| _mm256_cvtph_ps(_mm_loadu_si128(p.add(8 * v) as *const __m128i)))
-        }
-    }
+/// 24 bytes from p as floats.
+#[target_feature(enable = "avx2,f16c")]
+#[inline]
+unsafe fn load24_u8(p: *const u8) -> [__m256; 3] {
+    [
+        _mm256_cvtepi32_ps(_mm256_cvtepu8_epi32(_mm_loadl_epi64(p as *const __m128i))),
+        _mm256_cvtepi32_ps(_mm256_cvtepu8_epi32(_mm_loadl_epi64(p.add(8) as *const __m128i))),
+        _mm256_cvtepi32_ps(_mm256_cvtepu8_epi32(_mm_loadl_epi64(p.add(16) as *const __m128i))),
+    ]
+}
+
+/// 24 halves from p as floats.
+#[target_feature(enable = "avx2,f16c")]
+#[inline]
+unsafe fn load24_f16(p: *const u16) -> [__m256; 3] {
+    [
+        _mm256_cvtph_ps(_mm_loadu_si128(p as *const __m128i)),
+        _mm256_cvtph_ps(_mm_loadu_si128(p.add(8) as *const __m128i)),
+        _mm256_cvtph_ps(_mm_loadu_si128(p.add(16) as *const __m128i)),
+    ]
 }
 
 /// Blocks 0..blocks of row r (8 pixels each) into row[..blocks * 24].
@@ -42,7 +55,11 @@ pub(crate) unsafe fn row(relighter: &Relighter, r: usize, folded: &Folded, row: 
     let uniform: Vec<[__m256; 3]> = folded.uniform.iter().map(|w| pattern(w)).collect();
     let base = pattern(&folded.base);
     let points: Vec<Vec<[__m256; 3]>> = folded.points.iter().map(|(_, ws, _)| ws.iter().map(|w| pattern(w)).collect()).collect();
-    let spread: [__m256i; 3] = std::array::from_fn(|v| _mm256_loadu_si256(SPREAD[v].as_ptr() as *const __m256i));
+    let spread = [
+        _mm256_loadu_si256(SPREAD[0].as_ptr() as *const __m256i),
+        _mm256_loadu_si256(SPREAD[1].as_ptr() as *const __m256i),
+        _mm256_loadu_si256(SPREAD[2].as_ptr() as *const __m256i),
+    ];
     let maps = relighter.maps();
     let mut raw = [[_mm256_setzero_ps(); 3]; 25];
     let mut t = [[0.0f32; LANES]; 25];
@@ -52,7 +69,10 @@ pub(crate) unsafe fn row(relighter: &Relighter, r: usize, folded: &Folded, row: 
         let first = (r * relighter.width + p) * 3;
         let mut acc = base;
         for i in 0..k {
-            raw[i] = load24(maps, i * plane + first);
+            raw[i] = match maps {
+                Maps::U8(m) => load24_u8(m.as_ptr().add(i * plane + first)),
+                Maps::F16(m) => load24_f16(m.as_ptr().add(i * plane + first)),
+            };
             for v in 0..3 {
                 acc[v] = _mm256_add_ps(acc[v], _mm256_mul_ps(uniform[i][v], raw[i][v]));
             }

@@ -24,9 +24,10 @@ const C4E: f32 = 0.105_785_55;
 const C4F: f32 = 0.473_087_35;
 const C4G: f32 = 0.625_835_7;
 
-/// Y_i of the directions (x, y, z) (unit) for i < 25, lane j = direction j.
+/// Y_i of the directions (x, y, z) (unit) for i < coeffs (1, 4, 9, 16 or 25; bands 0..2 are
+/// always written), lane j = direction j.
 #[inline(always)]
-pub fn eval(x: &Lanes, y: &Lanes, z: &Lanes, out: &mut [Lanes; 25]) {
+pub fn eval(x: &Lanes, y: &Lanes, z: &Lanes, coeffs: usize, out: &mut [Lanes; 25]) {
     for j in 0..LANES {
         let (x, y, z) = (x[j], y[j], z[j]);
         let (x2, y2, z2) = (x * x, y * y, z * z);
@@ -39,6 +40,13 @@ pub fn eval(x: &Lanes, y: &Lanes, z: &Lanes, out: &mut [Lanes; 25]) {
         out[6][j] = C2B * (3.0 * z2 - 1.0);
         out[7][j] = -C2A * x * z;
         out[8][j] = C2C * (x2 - y2);
+    }
+    if coeffs <= 9 {
+        return;
+    }
+    for j in 0..LANES {
+        let (x, y, z) = (x[j], y[j], z[j]);
+        let (x2, y2, z2) = (x * x, y * y, z * z);
         out[9][j] = -C3A * y * (3.0 * x2 - y2);
         out[10][j] = C3B * x * y * z;
         out[11][j] = -C3C * y * (5.0 * z2 - 1.0);
@@ -46,6 +54,13 @@ pub fn eval(x: &Lanes, y: &Lanes, z: &Lanes, out: &mut [Lanes; 25]) {
         out[13][j] = -C3C * x * (5.0 * z2 - 1.0);
         out[14][j] = C3E * z * (x2 - y2);
         out[15][j] = -C3A * x * (x2 - 3.0 * y2);
+    }
+    if coeffs <= 16 {
+        return;
+    }
+    for j in 0..LANES {
+        let (x, y, z) = (x[j], y[j], z[j]);
+        let (x2, y2, z2) = (x * x, y * y, z * z);
         out[16][j] = C4A * x * y * (x2 - y2);
         out[17][j] = -C4B * y * z * (3.0 * x2 - y2);
         out[18][j] = C4C * x * y * (7.0 * z2 - 1.0);
@@ -78,7 +93,7 @@ mod tests {
             let y = std::array::from_fn(|j| chunk[j][1]);
             let z = std::array::from_fn(|j| chunk[j][2]);
             let mut out = [[0.0; 8]; 25];
-            super::eval(&x, &y, &z, &mut out);
+            super::eval(&x, &y, &z, 25, &mut out);
             for (j, d) in chunk.iter().enumerate() {
                 let mut expect = [0.0; 25];
                 basis.eval(*d, &mut expect);
