@@ -1,12 +1,15 @@
 """The web viewer's local server: `python -m hemishadow serve PANORAMA.json`.
 
 Serves, on 127.0.0.1 only:
-    /                     the viewer (the files of web/ beside this module)
-    /panorama/FILE        the files of the compact panorama's folder (panorama.json, shNN.png, alpha.png,
-                          position.f32)
-    /environments.json    {"environments": [{"name", "sh": k rows of [r, g, b]}]}: lighting SH of a white
-                          environment and Blender's bundled HDRIs (projected once, in the background from the
-                          start), truncated to the panorama's k
+    /                        the viewer (the files of web/ beside this module)
+    /panorama/FILE           the files of the compact panorama's folder (panorama.json, shNN.png, alpha.png,
+                             position.f32, bounce.png)
+    /environments.json       {"environments": [{"name", "sh": k rows of [r, g, b], "image": {"file", "width",
+                             "height"} or absent}]}: a white environment and Blender's bundled HDRIs, their
+                             lighting SH truncated to the panorama's k (projected once, in the background from
+                             the start)
+    /environments/N.f32      environment N's equirectangular image, raw little-endian float32 RGB, row 0 at the
+                             top: background pixels show it, as `hemishadow relight --env` does
 Nothing else is reachable: no directory listings, no path outside those folders.
 """
 
@@ -18,6 +21,8 @@ import math
 import pathlib
 import threading
 import urllib.parse
+
+import numpy as np
 
 WEB = pathlib.Path(__file__).resolve().parent / "web"
 TYPES = {".html": "text/html; charset=utf-8", ".js": "text/javascript; charset=utf-8", ".css": "text/css",
@@ -49,11 +54,12 @@ def uniform_white(count: int) -> list:
 
 
 def environments(count: int) -> list[dict]:
-    """White, then Blender's bundled HDRIs (when the bpy module and OpenEXR are installed)."""
-    out = [{"name": "white", "sh": uniform_white(count)}]
+    """[{"name", "sh" (count rows of RGB), "image" ((H, W, 3) float32) or None}]: white, then Blender's
+    bundled HDRIs (when the bpy module and OpenEXR are installed)."""
+    out = [{"name": "white", "sh": uniform_white(count), "image": None}]
     try:
         from .. import project_environment
-        from ..environment import builtin_hdris
+        from ..environment import builtin_hdris, read_exr
 
         hdris = builtin_hdris()
     except ImportError:
@@ -61,40 +67,62 @@ def environments(count: int) -> list[dict]:
     bands = math.isqrt(count)
     for name, path in hdris.items():
         try:
-            sh = project_environment(path, bands=bands)
+            image = np.ascontiguousarray(read_exr(path)[:, :, :3], dtype=np.float32)
+            sh = project_environment(image, bands=bands)
         except (ImportError, OSError, ValueError):
             continue  # no OpenEXR, an unreadable file: that environment is left out
-        out.append({"name": name, "sh": [[float(v) for v in row] for row in sh]})
+        out.append({"name": name, "sh": [[float(v) for v in row] for row in sh], "image": image})
     return out
 
 
-def make_server(panorama_json, port: int = 0, environments_json: bytes | None = None):
-    """A ThreadingHTTPServer on 127.0.0.1:port (0: any free port); call serve_forever()."""
+def _published(found: list[dict]) -> tuple[bytes, dict[str, bytes]]:
+    """(environments.json, {"environments/N.f32": image bytes})."""
+    listed, images = [], {}
+    for i, env in enumerate(found):
+        entry = {"name": env["name"], "sh": [[float(v) for v in row] for row in env["sh"]]}
+        image = env.get("image")
+        if image is not None:
+            image = np.asarray(image, dtype="<f4")
+            if image.ndim != 3 or image.shape[2] != 3:
+                raise ValueError(f"environment {env['name']}: the image must be (H, W, 3), got {image.shape}")
+            entry["image"] = {"file": f"environments/{i}.f32", "width": image.shape[1], "height": image.shape[0]}
+            images[entry["image"]["file"]] = np.ascontiguousarray(image).tobytes()
+        listed.append(entry)
+    return json.dumps({"environments": listed}).encode(), images
+
+
+def make_server(panorama_json, port: int = 0, environments_list: list[dict] | None = None):
+    """A ThreadingHTTPServer on 127.0.0.1:port (0: any free port); call serve_forever().
+    environments_list: as `environments` returns (default: those, projected in the background)."""
     path = pathlib.Path(panorama_json).resolve()
     meta = read_panorama(path)
-    ready, cache = threading.Event(), [environments_json]
+    count = len(meta["maps"])
+    ready, published = threading.Event(), [b"", {}]
+
+    def publish(found):
+        published[:] = _published(found)
+        ready.set()
 
     def project():  # a few seconds: started now, in the background, so the server answers at once
         try:
-            cache[0] = json.dumps({"environments": environments(len(meta["maps"]))}).encode()
+            publish(environments(count))
         finally:  # whatever happened, the page gets an answer (white alone if the projection failed)
-            if cache[0] is None:
-                cache[0] = json.dumps({"environments": [{"name": "white", "sh": uniform_white(len(meta["maps"]))}]}).encode()
-            ready.set()
+            if not ready.is_set():
+                publish([{"name": "white", "sh": uniform_white(count)}])
 
-    if environments_json is None:
+    if environments_list is None:
         threading.Thread(target=project, daemon=True).start()
     else:
-        ready.set()
-
+        publish(environments_list)
     roots = {"": WEB, "panorama/": path.parent}
 
     class Handler(http.server.BaseHTTPRequestHandler):
         def do_GET(self):  # noqa: N802 (http.server's name)
             name = urllib.parse.unquote(urllib.parse.urlsplit(self.path).path).lstrip("/") or "index.html"
-            if name == "environments.json":
+            if name == "environments.json" or name.startswith("environments/"):
                 ready.wait()
-                return self.reply(cache[0], TYPES[".json"])
+                body = published[0] if name == "environments.json" else published[1].get(name)
+                return self.send_error(404) if body is None else self.reply(body, TYPES[pathlib.Path(name).suffix])
             prefix = "panorama/" if name.startswith("panorama/") else ""
             root = roots[prefix]
             file = (root / name[len(prefix):]).resolve()
@@ -119,8 +147,8 @@ def make_server(panorama_json, port: int = 0, environments_json: bytes | None = 
     return http.server.ThreadingHTTPServer(("127.0.0.1", port), Handler)
 
 
-def serve_in_thread(panorama_json, port: int = 0, environments_json: bytes | None = None):
+def serve_in_thread(panorama_json, port: int = 0, environments_list: list[dict] | None = None):
     """Start a server in a daemon thread (tests); returns it (server.server_address, server.shutdown())."""
-    server = make_server(panorama_json, port, environments_json)
+    server = make_server(panorama_json, port, environments_list)
     threading.Thread(target=server.serve_forever, daemon=True).start()
     return server

@@ -2,6 +2,8 @@
 //   radiance = sum_i value_i * (w_i + sum_points I / d^2 * Y_i(to the point))     (a surface pixel)
 //   radiance = sum_i E_i * Y_i(R d)                                               (a background pixel)
 //   + the baked bounce term when asked (every pixel, as the native relight adds it)
+// or, when the environment comes with its image, background pixels show the image itself (nearest pixel, looked
+// up as Blender's Environment Texture through the World's Mapping rotation), as `hemishadow relight --env` does.
 // value_i = offset_i + scale_i * byte / 255 (map i), w_i the per-coefficient weights of the suns and the
 // environment (the same for every pixel), I the point's intensity P / (4 pi) in W/sr (d^2 = 1 with the
 // "constant" falloff, Wong et al.'s option: every pixel lit as if the lamp were 1 m away), E the environment's
@@ -44,6 +46,10 @@ uniform vec3 pointIntensity[POINTS];
 uniform bool pointInverseSquare[POINTS];
 uniform mat3 rotation;
 uniform float exposure;
+uniform sampler2D envImage;
+uniform bool envImageOn;
+uniform mat3 envMapping;
+uniform vec3 envImageScale;
 out vec4 color;
 
 void basis(vec3 d, out float y[K]) {
@@ -87,6 +93,13 @@ vec3 background(ivec2 texel) {
   float u = (float(texel.x) + 0.5) / float(size.x), v = 1.0 - (float(texel.y) + 0.5) / float(size.y);
   float phi = (0.5 - u) * 6.283185307179586, theta = (v - 0.5) * 3.141592653589793;
   vec3 d = rotation * vec3(cos(theta) * cos(phi), cos(theta) * sin(phi), sin(theta));
+  if (envImageOn) {  // hemishadow.panorama.picture.sample_equirectangular
+    vec3 m = envMapping * d;
+    float iu = -atan(m.y, m.x) / 6.283185307179586 + 0.5, iv = atan(m.z, length(m.xy)) / 3.141592653589793 + 0.5;
+    ivec2 n = textureSize(envImage, 0);
+    ivec2 at = clamp(ivec2(int(iu * float(n.x)), int((1.0 - iv) * float(n.y))), ivec2(0), n - 1);
+    return envImageScale * texelFetch(envImage, at, 0).rgb;
+  }
   float y[K];
   basis(d, y);
   vec3 sum = vec3(0.0);
@@ -104,7 +117,8 @@ void main() {
   texel.y = size.y - 1 - texel.y;  // row 0 is the top row, as in the files
   bool hit = texelFetch(alpha, texel, 0).r > 0.5;
   vec3 radiance = hit ? surface(texel) : background(texel);
-  if (bounceOn) radiance += bounceOffset + bounceScale * texelFetch(bounce, texel, 0).rgb;
+  // The bounce term goes on every pixel but those that show the environment's image (relight's order).
+  if (bounceOn && (hit || !envImageOn)) radiance += bounceOffset + bounceScale * texelFetch(bounce, texel, 0).rgb;
   color = vec4(standardView(radiance * exposure), 1.0);
 }`;
 
@@ -196,6 +210,8 @@ export class Relighter {
     gl.uniform1i(u.alpha, 1);
     gl.uniform1i(u.position, 2);
     gl.uniform1i(u.bounce, 3);
+    gl.uniform1i(u.envImage, 4);
+    if (!this.envImage) this.setEnvironmentImage(null);
     gl.uniform3fv(u.bounceScale, b ? b.scale : [0, 0, 0]);
     gl.uniform3fv(u.bounceOffset, b ? b.offset : [0, 0, 0]);
     gl.uniform1i(u.count, count);
@@ -206,6 +222,18 @@ export class Relighter {
     gl.uniformMatrix3fv(u.rotation, false, [0, 1, 2].flatMap((c) => [r[0][c], r[1][c], r[2][c]]));
     this.count = count;
     this.hits = this.readHits(width, height);
+  }
+
+  // image: {width, height, data (Float32Array, RGB, row 0 at the top)} or null (a 1 x 1 black texture).
+  setEnvironmentImage(image) {
+    const { gl } = this;
+    gl.deleteTexture(this.envImage ?? null);
+    this.envImage = gl.createTexture();
+    gl.activeTexture(gl.TEXTURE4);
+    gl.bindTexture(gl.TEXTURE_2D, this.envImage);
+    gl.texStorage2D(gl.TEXTURE_2D, 1, gl.RGB32F, image ? image.width : 1, image ? image.height : 1);
+    if (image) gl.texSubImage2D(gl.TEXTURE_2D, 0, 0, 0, image.width, image.height, gl.RGB, gl.FLOAT, image.data);
+    nearest(gl, gl.TEXTURE_2D);
   }
 
   // The hit mask on the CPU (for placing a point light on a surface), read back exactly from the texture.
@@ -224,7 +252,8 @@ export class Relighter {
   }
 
   // lights: {weights, environment (count x [r,g,b]), points: [{position, intensity: [r,g,b] W/sr, inverseSquare}],
-  // bounce (bool), exposure (EV)}
+  // bounce (bool), environmentImage (null or {mapping: 3x3 rows, scale: [r,g,b]}: show the uploaded image),
+  // exposure (EV)}
   draw(lights) {
     const { gl } = this;
     const u = this.uniforms;
@@ -240,6 +269,13 @@ export class Relighter {
       gl.uniform1iv(u.pointInverseSquare, lights.points.map((p) => (p.inverseSquare ? 1 : 0)));
     }
     gl.uniform1i(u.bounceOn, lights.bounce ? 1 : 0);
+    const image = lights.environmentImage;
+    gl.uniform1i(u.envImageOn, image ? 1 : 0);
+    if (image) {
+      const m = image.mapping;
+      gl.uniformMatrix3fv(u.envMapping, false, [0, 1, 2].flatMap((c) => [m[0][c], m[1][c], m[2][c]]));
+      gl.uniform3fv(u.envImageScale, image.scale);
+    }
     gl.uniform1f(u.exposure, Math.pow(2, lights.exposure));
     gl.drawArrays(gl.TRIANGLES, 0, 3);
   }

@@ -7,7 +7,8 @@
 //   sun=X,Y,Z,STRENGTH    a sun: vector towards the light (world), irradiance in W/m^2; repeat for more
 //   point=X,Y,Z,POWER[,constant]  a point lamp at X,Y,Z (world, m) of POWER W (Blender's: P / (4 pi) W/sr), 1/d^2
 //                         falloff, or none with ",constant" (lit as if 1 m away); repeatable
-//   env=NAME[,STRENGTH]   an environment by name (the list in the environments' JSON)
+//   env=NAME[,STRENGTH]   an environment by name (the list in the environments' JSON); background pixels show
+//                         its image when it has one (as `hemishadow relight --env` does), else its SH
 //   envrot=DEGREES        the environment turned about Z as the World's Mapping node turns it
 //   bounce=1              add the panorama's baked bounce term (when it has one)
 //   exposure=EV           2^EV times the radiance before the Standard view transform
@@ -114,21 +115,31 @@ async function loadPanorama(url) {
 
 async function loadEnvironments(url) {
   try {
-    return (await (await fetchOk(url)).json()).environments;
+    const list = (await (await fetchOk(url)).json()).environments;
+    for (const e of list) if (e.image) e.image.url = new URL(e.image.file, new URL(url, location.href)).href;
+    return list;
   } catch (error) {
     if (params.has("env")) throw error;
     return [];  // the viewer works with lamps alone (e.g. the files served by another server)
   }
 }
 
+// An environment's image (raw float32 RGB), fetched once.
+async function environmentPixels(env) {
+  const { url, width, height } = env.image;
+  env.pixels ??= littleEndianFloats(await (await fetchOk(url)).arrayBuffer());
+  if (env.pixels.length !== width * height * 3) throw new Error(`${url}: not ${width} x ${height} RGB floats`);
+  return { width, height, data: env.pixels };
+}
+
 // The lights as the shader takes them: per-coefficient weights (suns + environment), the environment's SH
 // for the background, the point lamps' intensities.
-function lightsOf(state, environments, count) {
+function lightsOf(state, environments, count, imageShown) {
   const weights = Array.from({ length: count }, () => [0, 0, 0]);
   for (const sun of state.sunOn ? state.suns : []) {
     basis(sun.direction).slice(0, count).forEach((y, i) => { for (let c = 0; c < 3; c++) weights[i][c] += sun.strength * y; });
   }
-  let environment = [];
+  let environment = [], environmentImage = null;
   if (state.env.name) {
     const found = environments.find((e) => e.name === state.env.name);
     if (!found) throw new Error(`no environment named ${state.env.name} (have: ${environments.map((e) => e.name).join(", ")})`);
@@ -136,12 +147,16 @@ function lightsOf(state, environments, count) {
     // The Mapping node looks the image up at Rz(angle) d, so the light turns by -angle.
     environment = rotateAboutZ(sh, (-state.envRotation * Math.PI) / 180);
     environment.forEach((e, i) => { for (let c = 0; c < 3; c++) weights[i][c] += e[c]; });
+    if (imageShown === found.name) {
+      const a = (state.envRotation * Math.PI) / 180, cos = Math.cos(a), sin = Math.sin(a);
+      environmentImage = { mapping: [[cos, -sin, 0], [sin, cos, 0], [0, 0, 1]], scale: Array(3).fill(state.env.strength) };
+    }
   }
   const points = (state.pointOn ? state.points : []).map((p) => {
     const intensity = p.power / (4 * Math.PI);
     return { position: p.position, intensity: [intensity, intensity, intensity], inverseSquare: p.falloff !== "constant" };
   });
-  return { weights, environment, points, bounce: state.bounce, exposure: state.exposure };
+  return { weights, environment, environmentImage, points, bounce: state.bounce, exposure: state.exposure };
 }
 
 function writeUrl(state) {
@@ -234,6 +249,14 @@ async function main() {
   };
   if (state.env.name) addEnvironments(environments);
   else environmentsLoading.then(addEnvironments, (error) => { $("status").textContent = error.message; });
+  let imageShown = null;  // the environment whose image the relighter holds
+  const showImage = async () => {
+    const found = environments.find((e) => e.name === state.env.name);
+    if (!found?.image || imageShown === found.name) return false;
+    relighter.setEnvironmentImage(await environmentPixels(found));
+    imageShown = found.name;
+    return true;
+  };
   let pending = false;
   const redraw = () => {
     if (pending) return;
@@ -241,7 +264,7 @@ async function main() {
     requestAnimationFrame(() => {
       pending = false;
       try {
-        relighter.draw(lightsOf(state, environments, panorama.count));
+        relighter.draw(lightsOf(state, environments, panorama.count, imageShown));
         $("status").textContent = "";
       } catch (error) {
         $("status").textContent = error.message;
@@ -250,9 +273,14 @@ async function main() {
       writeUrl(state);
     });
   };
-  relighter.draw(lightsOf(state, environments, panorama.count));  // the first frame synchronously: errors surface
+  await showImage();
+  relighter.draw(lightsOf(state, environments, panorama.count, imageShown));  // the first frame at once: errors surface
   showState(state);
-  $("controls").addEventListener("input", () => { readControls(state); redraw(); });
+  $("controls").addEventListener("input", () => {
+    readControls(state);
+    redraw();  // the SH at once, the image when it is there
+    showImage().then((shown) => shown && redraw(), (error) => { $("status").textContent = error.message; });
+  });
   const canvas = $("view");
   canvas.addEventListener("pointerdown", (e) => { canvas.setPointerCapture(e.pointerId); onDrag(e, state, panorama, relighter, redraw); });
   canvas.addEventListener("pointermove", (e) => { if (e.buttons & 1) onDrag(e, state, panorama, relighter, redraw); });
