@@ -20,6 +20,7 @@ import re
 import struct
 import subprocess
 import sys
+import time
 import urllib.parse
 import zlib
 
@@ -345,3 +346,43 @@ def test_serve_command_names_a_bad_panorama(tmp_path):
                              "--no-browser", "--port", "0"], capture_output=True, text=True, timeout=60)
     assert result.returncode == 2
     assert "panorama.json: names 'sh00.png', which is not a file beside it" in result.stderr
+
+
+def test_dragging_moves_the_sun_and_shift_dragging_the_point_lamp(served):
+    """Mouse events through DevTools: a drag ends with the sun towards the pixel under the cursor (the contract's
+    mapping); a shift-drag puts the point lamp half a metre in front of the surface there (the position map)."""
+    require_chromium()
+    path = served["small"]
+    panorama = hp.Panorama.load(path)
+    dirs = hp.directions(panorama.width, panorama.height, panorama.rotation)
+    tools = shots.DevTools((800, 600))
+    try:
+        tools.open(served["bases"]["small"] + "?sun=0,0,1,3", (800, 600))
+        assert tools.wait_for_viewer()["state"] == "ready"
+        box = json.loads(tools.evaluate("JSON.stringify(document.getElementById('view').getBoundingClientRect())"))
+
+        def drag(path_pixels, modifiers=0):
+            points = [(box["x"] + (c + 0.5) / panorama.width * box["width"],
+                       box["y"] + (r + 0.5) / panorama.height * box["height"]) for c, r in path_pixels]
+            before = tools.evaluate("location.search")
+            for kind, (x, y) in [("mousePressed", points[0])] + [("mouseMoved", p) for p in points[1:]] + \
+                    [("mouseReleased", points[-1])]:
+                tools.call("Input.dispatchMouseEvent", type=kind, x=x, y=y, button="left", buttons=1, clickCount=1,
+                           modifiers=modifiers)
+            for _ in range(100):  # the URL follows the lights after the next frame
+                search = tools.evaluate("location.search")
+                if search != before:
+                    return urllib.parse.parse_qs(search[1:])
+                time.sleep(0.05)
+            raise AssertionError(f"the drag changed nothing: {before}")
+
+        query = drag([(10, 40), (40, 20), (70, 12)])
+        *sun, strength = (float(v) for v in query["sun"][0].split(","))
+        assert np.abs(np.array(sun) - dirs[12, 70]).max() < 1e-3 and strength == 3
+        query = drag([(30, 40), (25, 36)], modifiers=8)  # shift
+        *point, power = (float(v) for v in query["point"][0].split(","))
+        hit = panorama.position[36, 25].astype(np.float64)
+        back = min(0.5, 0.5 * np.linalg.norm(hit - panorama.origin))
+        assert panorama.mask[36, 25] and np.abs(np.array(point) - (hit - back * dirs[36, 25])).max() < 1e-3
+    finally:
+        tools.close()
