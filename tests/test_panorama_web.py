@@ -331,6 +331,16 @@ def test_serve_command_serves_the_viewer_the_panorama_and_environments(served):
         assert environments[0]["name"] == "white"
         assert all(len(e["sh"]) == 16 and all(len(row) == 3 for row in e["sh"]) for e in environments)
         assert abs(environments[0]["sh"][0][0] * 0.282095 - 1) < 1e-5  # radiance 1 in every direction
+        from hemishadow.environment import builtin_hdris, read_exr
+
+        hdris = builtin_hdris()
+        for env in environments[1:]:  # Blender's HDRIs, each with its image for the background
+            image = read_exr(hdris[env["name"]])[:, :, :3]
+            assert (env["image"]["height"], env["image"]["width"]) == image.shape[:2]
+            status, _, body = get("/" + env["image"]["file"])
+            assert status == 200 and np.array_equal(np.frombuffer(body, "<f4").reshape(image.shape), image)
+        assert len(environments) == 1 + len(hdris)
+        assert get(f"/environments/{len(environments)}.f32")[0] == 404
         for path in ("/panorama/../panorama.json", "/panorama/%2e%2e/p25/panorama.json", "/../cli.py",
                      "/%2e%2e/server.py", "/panorama/", "/web/index.html", "/nothing.js"):
             assert get(path)[0] == 404, path
