@@ -40,6 +40,7 @@ def read_panorama(path) -> dict:
         raise ValueError(f"{path}: not a compact hemishadow panorama (format hemishadow-panorama, version 1)")
     files = [m.get("file") for m in meta.get("maps", [])]
     files += [meta.get("position", {}).get("file"), meta.get("alpha", {}).get("file")]
+    files += [meta["bounce"].get("file")] if isinstance(meta.get("bounce"), dict) else []
     for name in files:
         if not isinstance(name, str) or not (path.parent / name).is_file():
             raise ValueError(f"{path}: names {name!r}, which is not a file beside it")

@@ -96,7 +96,10 @@ async function loadPanorama(url) {
     bitmap(at(meta.alpha.file)),
     fetchOk(at(meta.position.file)).then((r) => r.arrayBuffer()).then(littleEndianFloats),
   ]);
-  for (const [name, image] of [...meta.maps.map((m, i) => [m.file, maps[i]]), [meta.alpha.file, alpha]]) {
+  const bounce = meta.bounce && { bitmap: await bitmap(at(meta.bounce.file)), scale: meta.bounce.scale, offset: meta.bounce.offset };
+  const images = [...meta.maps.map((m, i) => [m.file, maps[i]]), [meta.alpha.file, alpha]];
+  if (bounce) images.push([meta.bounce.file, bounce.bitmap]);
+  for (const [name, image] of images) {
     if (image.width !== width || image.height !== height) {
       throw new Error(`${name} is ${image.width} x ${image.height}, the panorama ${width} x ${height}`);
     }
@@ -104,7 +107,6 @@ async function loadPanorama(url) {
   if (position.length !== width * height * 3) {
     throw new Error(`${meta.position.file} holds ${position.length} floats, expected ${width * height * 3}`);
   }
-  const bounce = meta.bounce && { bitmap: await bitmap(at(meta.bounce.file)), scale: meta.bounce.scale, offset: meta.bounce.offset };
   return {
     width, height, count, maps, alpha, position, bounce,
     scale: meta.maps.map((m) => m.scale), offset: meta.maps.map((m) => m.offset),
