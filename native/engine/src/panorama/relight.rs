@@ -4,7 +4,8 @@
 //! them fold into one weight per map and channel (a linear combination of maps); a point
 //! light gives L_i = I f(d) Y_i(l) with l and d from the pixel's position, evaluated per pixel.
 //!
-//! Maps are k planes of H x W x 3 values, 8-bit (value = offset + scale * byte / 255, the
+//! Maps come as k planes of H x W x 3 values and are kept row by row (row r of every map
+//! together: one relight reads memory front to back), 8-bit (value = offset + scale * byte / 255, the
 //! scale and offset folded into the weights) or float16. Rows run in parallel; within a row,
 //! blocks of 8 pixels (24 interleaved values) go through AVX2 when the CPU has it, else the
 //! portable code, which performs the same IEEE operations in the same order (same bits).
@@ -15,7 +16,6 @@ use super::directions::{self, Rotation};
 use super::half;
 use super::sh_lanes::{self, Lanes, LANES};
 use crate::error::{Error, Result};
-use crate::sh::ShBasis;
 
 pub enum Maps {
     U8(Vec<u8>),
@@ -87,6 +87,10 @@ impl Relighter {
             return Err(Error::invalid(format!("8-bit maps need {coeffs} scales and offsets")));
         }
         let plane = |a: usize| position.iter().map(|p| p[a]).collect::<Vec<f32>>();
+        let maps = match maps {
+            Maps::U8(m) => Maps::U8(by_rows(&m, coeffs, height, width * 3)),
+            Maps::F16(m) => Maps::F16(by_rows(&m, coeffs, height, width * 3)),
+        };
         Ok(Relighter { width, height, coeffs, maps, scale, offset, position: [plane(0), plane(1), plane(2)], hit, rotation })
     }
 
@@ -127,12 +131,11 @@ impl Relighter {
         }
         let folded = self.fold(lighting);
         let simd = simd && Self::simd_available();
-        let basis = ShBasis::new((k as f64).sqrt() as usize)?;
         let (cols, rows) = (directions::columns(self.width), directions::rows(self.height));
         let w3 = self.width * 3;
         out.par_chunks_mut(w3).enumerate().for_each(|(r, row)| {
             self.row(r, &folded, row, simd);
-            self.background(r, lighting.background, &basis, &rows, &cols, row);
+            self.background(r, lighting.background, &rows, &cols, row);
         });
         Ok(())
     }
@@ -180,6 +183,12 @@ impl Relighter {
         }
     }
 
+    /// Where row r of map i starts in `maps`.
+    #[inline(always)]
+    pub(crate) fn map_start(&self, r: usize, i: usize) -> usize {
+        (r * self.coeffs + i) * self.width * 3
+    }
+
     pub(crate) fn maps(&self) -> &Maps {
         &self.maps
     }
@@ -187,11 +196,10 @@ impl Relighter {
     /// The pixels p .. p + lanes of row r (out: their 3 * lanes values).
     fn block_portable(&self, r: usize, p: usize, lanes: usize, folded: &Folded, out: &mut [f32]) {
         let k = self.coeffs;
-        let first = (r * self.width + p) * 3;
         let n = out.len();
         let mut raw = [[0.0f32; 3 * LANES]; 25];
         for (i, values) in raw.iter_mut().enumerate().take(k) {
-            let start = i * self.width * self.height * 3 + first;
+            let start = self.map_start(r, i) + p * 3;
             match &self.maps {
                 Maps::U8(m) => values[..n].iter_mut().zip(&m[start..start + n]).for_each(|(v, b)| *v = *b as f32),
                 Maps::F16(m) => values[..n].iter_mut().zip(&m[start..start + n]).for_each(|(v, b)| *v = half::to_f32(*b)),
@@ -275,29 +283,62 @@ impl Relighter {
         }
     }
 
-    /// Background pixels show `background` (radiance SH) in their direction, or black.
-    fn background(&self, r: usize, background: Option<&[[f32; 3]]>, basis: &ShBasis, rows: &[(f64, f64)],
-                  cols: &[(f64, f64)], row: &mut [f32]) {
-        let mut y = [0.0f32; 25];
-        for c in 0..self.width {
-            if self.hit[r * self.width + c] {
-                continue;
+    /// Background pixels show `background` (radiance SH) in their direction, or black; 8 at a
+    /// time through the lane SH.
+    fn background(&self, r: usize, background: Option<&[[f32; 3]]>, rows: &[(f64, f64)], cols: &[(f64, f64)],
+                  row: &mut [f32]) {
+        let hit = &self.hit[r * self.width..(r + 1) * self.width];
+        let Some(sh) = background else {
+            for (c, _) in hit.iter().enumerate().filter(|(_, h)| !**h) {
+                row[c * 3..c * 3 + 3].fill(0.0);
             }
-            let value = match background {
-                None => [0.0; 3],
-                Some(sh) => {
-                    let d = directions::direction(&self.rotation, rows[r], cols[c]).map(|v| v as f32);
-                    basis.eval(d, &mut y);
-                    let mut v = [0.0f32; 3];
-                    for (i, l) in sh.iter().enumerate() {
-                        for ch in 0..3 {
-                            v[ch] += y[i] * l[ch];
-                        }
-                    }
-                    v
-                }
-            };
-            row[c * 3..c * 3 + 3].copy_from_slice(&value);
+            return;
+        };
+        let mut pending = [0usize; LANES];
+        let mut count = 0;
+        for c in (0..self.width).filter(|&c| !hit[c]) {
+            pending[count] = c;
+            count += 1;
+            if count == LANES {
+                self.background_lanes(r, &pending, count, sh, rows, cols, row);
+                count = 0;
+            }
+        }
+        if count > 0 {
+            self.background_lanes(r, &pending, count, sh, rows, cols, row);
         }
     }
+
+    #[allow(clippy::too_many_arguments)]
+    fn background_lanes(&self, r: usize, columns: &[usize; LANES], count: usize, sh: &[[f32; 3]], rows: &[(f64, f64)],
+                        cols: &[(f64, f64)], row: &mut [f32]) {
+        let (mut x, mut y, mut z) = ([0.0f32; LANES], [0.0f32; LANES], [0.0f32; LANES]);
+        for j in 0..count {
+            let d = directions::direction(&self.rotation, rows[r], cols[columns[j]]);
+            (x[j], y[j], z[j]) = (d[0] as f32, d[1] as f32, d[2] as f32);
+        }
+        let mut basis = [[0.0f32; LANES]; 25];
+        sh_lanes::eval(&x, &y, &z, self.coeffs, &mut basis);
+        for j in 0..count {
+            let mut v = [0.0f32; 3];
+            for (i, l) in sh.iter().enumerate() {
+                for ch in 0..3 {
+                    v[ch] += basis[i][j] * l[ch];
+                }
+            }
+            row[columns[j] * 3..columns[j] * 3 + 3].copy_from_slice(&v);
+        }
+    }
+}
+
+/// (k, H, row) planes -> (H, k, row): each panorama row's maps side by side.
+fn by_rows<T: Copy>(planes: &[T], k: usize, height: usize, row: usize) -> Vec<T> {
+    let mut out = Vec::with_capacity(planes.len());
+    for r in 0..height {
+        for i in 0..k {
+            let start = (i * height + r) * row;
+            out.extend_from_slice(&planes[start..start + row]);
+        }
+    }
+    out
 }

@@ -51,7 +51,6 @@ unsafe fn load24_f16(p: *const u16) -> [__m256; 3] {
 #[target_feature(enable = "avx2,f16c")]
 pub(crate) unsafe fn row(relighter: &Relighter, r: usize, folded: &Folded, row: &mut [f32], blocks: usize) {
     let k = relighter.coeffs;
-    let plane = relighter.width * relighter.height * 3;
     let uniform: Vec<[__m256; 3]> = folded.uniform.iter().map(|w| pattern(w)).collect();
     let base = pattern(&folded.base);
     let points: Vec<Vec<[__m256; 3]>> = folded.points.iter().map(|(_, ws, _)| ws.iter().map(|w| pattern(w)).collect()).collect();
@@ -66,12 +65,11 @@ pub(crate) unsafe fn row(relighter: &Relighter, r: usize, folded: &Folded, row: 
     let mut offsets = [0.0f32; 3 * LANES];
     for b in 0..blocks {
         let p = b * LANES;
-        let first = (r * relighter.width + p) * 3;
         let mut acc = base;
         for i in 0..k {
             raw[i] = match maps {
-                Maps::U8(m) => load24_u8(m.as_ptr().add(i * plane + first)),
-                Maps::F16(m) => load24_f16(m.as_ptr().add(i * plane + first)),
+                Maps::U8(m) => load24_u8(m.as_ptr().add(relighter.map_start(r, i) + p * 3)),
+                Maps::F16(m) => load24_f16(m.as_ptr().add(relighter.map_start(r, i) + p * 3)),
             };
             for v in 0..3 {
                 acc[v] = _mm256_add_ps(acc[v], _mm256_mul_ps(uniform[i][v], raw[i][v]));

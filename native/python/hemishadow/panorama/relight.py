@@ -54,7 +54,7 @@ def relight(panorama, lights, *, exposure=0.0, background=None, maps=None, bounc
     scale = float(2.0 ** exposure)
     uniform, points, background_sh = weights(list(lights), panorama.coefficient_count, scale)
     engine = panorama.relighter(maps)
-    image = engine.relight(uniform, points, background_sh, out, simd)
+    image = engine.relight(uniform, points, background_sh if background_sh.any() else None, out, simd)
     if bounce:
         if panorama.bounce is None:
             raise ValueError("this panorama has no bounce term")
