@@ -91,9 +91,11 @@ class DevTools:
 
     def open(self, url, window=(400, 300)):
         """The tab (the one Chromium opened) at `url`, one CSS pixel per device pixel, the viewport `window`."""
-        pages = [t for t in self.call("Target.getTargets")["targetInfos"] if t["type"] == "page"]
-        target = pages[0]["targetId"] if pages else self.call("Target.createTarget", url="about:blank")["targetId"]
-        self.session = self.call("Target.attachToTarget", targetId=target, flatten=True)["sessionId"]
+        if self.session is None:
+            pages = [t for t in self.call("Target.getTargets")["targetInfos"] if t["type"] == "page"]
+            target = pages[0]["targetId"] if pages else self.call("Target.createTarget", url="about:blank")["targetId"]
+            self.session = self.call("Target.attachToTarget", targetId=target, flatten=True)["sessionId"]
+        self.url = url
         self.call("Emulation.setDeviceMetricsOverride", width=window[0], height=window[1], deviceScaleFactor=1,
                   mobile=False)
         self.call("Page.enable")
@@ -107,7 +109,8 @@ class DevTools:
         first frame or failed (the page sets <html data-state>)."""
         deadline = time.monotonic() + timeout
         while True:
-            state = self.evaluate("document.documentElement.dataset.state || null")
+            state = self.evaluate(f"document.URL === new URL({json.dumps(self.url)}).href && "
+                                  "document.documentElement.dataset.state || null")
             if state in ("ready", "error") or time.monotonic() > deadline:
                 status = self.evaluate("(document.getElementById('status') || {}).textContent || ''")
                 return {"state": state, "status": status}
@@ -132,16 +135,18 @@ class DevTools:
         self.process.stderr.close()
 
 
-def screenshot(url: str, out, window=(400, 300)) -> dict:
+def screenshot(url: str, out, window=(400, 300), tools: DevTools | None = None) -> dict:
     """The viewer at `url` as a PNG of the viewport `window` at `out`, taken once it has drawn (or failed);
-    returns the viewer's state and status line."""
-    tools = DevTools(window)
+    returns the viewer's state and status line. tools: a running DevTools to reuse (else one for this shot)."""
+    own = tools is None
+    tools = DevTools(window) if own else tools
     try:
         tools.open(url, window)
         state = tools.wait_for_viewer()
         tools.screenshot(out)
     finally:
-        tools.close()
+        if own:
+            tools.close()
     return state
 
 

@@ -187,11 +187,19 @@ def numpy_radiance(path, suns=(), points=(), env=None, env_rotation_deg=0.0, bou
 
 # --- the viewer ---------------------------------------------------------------------------------------------
 
-def screenshot(url: str, width: int, height: int, out: pathlib.Path) -> tuple[np.ndarray, dict]:
+@pytest.fixture(scope="module")
+def browser():
+    """One headless Chromium for the module's pages (each launch costs seconds)."""
+    require_chromium()
+    tools = shots.DevTools(WINDOW)
+    yield tools
+    tools.close()
+
+
+def screenshot(browser, url: str, width: int, height: int, out: pathlib.Path) -> tuple[np.ndarray, dict]:
     """The viewer at `url` in headless Chromium once it has drawn: its canvas (top-left, one pixel per pixel)
     as (H, W, 3), and the page's state and status line."""
-    require_chromium()
-    state = shots.screenshot(url, out, WINDOW)
+    state = shots.screenshot(url, out, WINDOW, browser)
     return np.asarray(PIL.open(out).convert("RGB"))[:height, :width], state
 
 
@@ -231,12 +239,12 @@ def served(tmp_path_factory):
         server.server_close()
 
 
-def compare(base: str, name, query: dict, reference, hit, tmp_path):
+def compare(browser, base: str, name, query: dict, reference, hit, tmp_path):
     """The viewer's screenshot against the reference: 99 % of pixels within 2/255, over the picture and over the
     surface and background pixels each (a background is a few % of the picture)."""
     height, width = reference.shape[:2]
     url = base + "?" + urllib.parse.urlencode({"ui": "0", **query}, doseq=True)
-    shot, state = screenshot(url, width, height, tmp_path / f"{name}.png")
+    shot, state = screenshot(browser, url, width, height, tmp_path / f"{name}.png")
     assert state["state"] == "ready", f"{name}: the viewer did not draw: {state}"
     error = np.abs(shot.astype(int) - reference.astype(int)).max(axis=-1)
     within = {part: float(np.mean(error[mask] <= 2)) for part, mask in
@@ -263,23 +271,23 @@ def test_the_native_relight_does_the_sums_of_the_contract(served):
         assert np.abs(native - ours).max() <= 1e-4 * max(1.0, np.abs(ours).max()), path
 
 
-def test_sun_point_environment_and_exposure_match_the_relight(served, tmp_path):
+def test_sun_point_environment_and_exposure_match_the_relight(served, browser, tmp_path):
     """All the sums at once: a sun, a point lamp, a point lamp without falloff, an environment turned about Z
     (its image in the background, as the relight CLI shows it), the bounce term, exposure; a turned viewpoint
     (background directions) and 25 coefficients (every SH polynomial of the shader)."""
     reference = srgb(native_radiance(served["big"], **dict(ALL, env=served["env"]), exposure=-0.5,
                                      image=served["image"]))
     assert 0.2 < np.mean(reference) / 255 < 0.8 and np.mean(reference == 255) < 0.05  # a picture, not clipped
-    compare(served["bases"]["big"], "all", {"sun": "0.4,-0.6,0.7,2.5", "point": ["1.2,0.8,-0.5,150", "-2,-1.5,1.2,8,constant"],
+    compare(browser, served["bases"]["big"], "all", {"sun": "0.4,-0.6,0.7,2.5", "point": ["1.2,0.8,-0.5,150", "-2,-1.5,1.2,8,constant"],
                                             "env": "sky,1", "envrot": "40", "bounce": "1", "exposure": "-0.5"},
             reference, hp.Panorama.load(served["big"]).mask, tmp_path)
 
 
-def test_point_light_and_environment_sh_match_the_relight(served, tmp_path):
+def test_point_light_and_environment_sh_match_the_relight(served, browser, tmp_path):
     """A point lamp, 1/d^2 from the float32 position map, and an environment without an image (background pixels
     show its SH), 16 coefficients; the maps carry a gAMA chunk that must change nothing (they are data)."""
     reference = srgb(native_radiance(served["small"], points=[LONE_POINT], env=0.3 * served["env"]))
-    compare(served["bases"]["small"], "point", {"point": "-1.5,1,0.8,300", "env": "glow"}, reference,
+    compare(browser, served["bases"]["small"], "point", {"point": "-1.5,1,0.8,300", "env": "glow"}, reference,
             hp.Panorama.load(served["small"]).mask, tmp_path)
 
 
@@ -358,14 +366,13 @@ def test_serve_command_names_a_bad_panorama(tmp_path):
     assert "panorama.json: names 'sh00.png', which is not a file beside it" in result.stderr
 
 
-def test_dragging_moves_the_sun_and_shift_dragging_the_point_lamp(served):
+def test_dragging_moves_the_sun_and_shift_dragging_the_point_lamp(served, browser):
     """Mouse events through DevTools: a drag ends with the sun towards the pixel under the cursor (the contract's
     mapping); a shift-drag puts the point lamp half a metre in front of the surface there (the position map)."""
-    require_chromium()
     path = served["small"]
     panorama = hp.Panorama.load(path)
     dirs = hp.directions(panorama.width, panorama.height, panorama.rotation)
-    tools = shots.DevTools((800, 600))
+    tools = browser
     try:
         tools.open(served["bases"]["small"] + "?sun=0,0,1,3", (800, 600))
         assert tools.wait_for_viewer()["state"] == "ready"
@@ -395,4 +402,4 @@ def test_dragging_moves_the_sun_and_shift_dragging_the_point_lamp(served):
         back = min(0.5, 0.5 * np.linalg.norm(hit - panorama.origin))
         assert panorama.mask[36, 25] and np.abs(np.array(point) - (hit - back * dirs[36, 25])).max() < 1e-3
     finally:
-        tools.close()
+        tools.open("about:blank", WINDOW)  # the next page starts from the module's window
