@@ -403,3 +403,16 @@ def test_dragging_moves_the_sun_and_shift_dragging_the_point_lamp(served, browse
         assert panorama.mask[36, 25] and np.abs(np.array(point) - (hit - back * dirs[36, 25])).max() < 1e-3
     finally:
         tools.open("about:blank", WINDOW)  # the next page starts from the module's window
+
+
+def test_serve_command_names_a_busy_port(served):
+    import socket
+
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        result = subprocess.run([sys.executable, "-m", "hemishadow", "serve", str(served["small"]), "--no-browser",
+                                 "--port", str(port)], capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2
+    assert f"cannot serve on 127.0.0.1:{port} (Address already in use); pick another with --port" in result.stderr
