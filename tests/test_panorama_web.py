@@ -212,8 +212,9 @@ def sky_image(width, height):
 
 @pytest.fixture(scope="module")
 def served(tmp_path_factory):
-    """Two panoramas (25 coefficients turned 30 degrees about Z; 16 coefficients with gAMA chunks) behind the viewer's
-    server, with one environment."""
+    """Two panoramas, each behind its own viewer's server: 128 x 64 x 25 coefficients turned 30 degrees about Z with
+    a bounce term; 96 x 48 x 16 with gAMA chunks in its maps. Two environments: "sky" with an image (the
+    background shows it), "glow" with SH only."""
     from hemishadow.panorama.server import serve_in_thread
 
     root = tmp_path_factory.mktemp("panoweb")
