@@ -359,6 +359,9 @@ def test_serve_command_serves_the_viewer_the_panorama_and_environments(served):
 
 
 def test_serve_command_names_a_bad_panorama(tmp_path):
+    result = subprocess.run([sys.executable, "-m", "hemishadow", "serve", str(tmp_path / "pano.exr"), "--no-browser"],
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2 and "pano.exr: the viewer reads the compact form's JSON" in result.stderr
     (tmp_path / "panorama.json").write_text(json.dumps({"format": "hemishadow-panorama", "version": 1,
                                                         "maps": [{"file": "sh00.png"}]}))
     result = subprocess.run([sys.executable, "-m", "hemishadow", "serve", str(tmp_path / "panorama.json"),

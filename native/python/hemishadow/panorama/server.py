@@ -32,6 +32,9 @@ TYPES = {".html": "text/html; charset=utf-8", ".js": "text/javascript; charset=u
 def read_panorama(path) -> dict:
     """The compact panorama's JSON, checked enough that the viewer will find its files."""
     path = pathlib.Path(path)
+    if path.suffix.lower() != ".json":
+        raise ValueError(f"{path}: the viewer reads the compact form's JSON (Panorama.save('.../panorama.json') "
+                         "or `hemishadow panorama ... --out .../panorama.json`), not a {path.suffix or 'bare'} file")
     try:
         meta = json.loads(path.read_text())
     except (OSError, ValueError) as error:
