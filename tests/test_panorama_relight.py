@@ -229,3 +229,29 @@ def test_panorama_and_relight_commands(tmp_path):
     done = run_cli("panorama", tmp_path / "scene.ply", "--at", "1.2,0.3,-0.4", "--size", "32x16", "--out", tmp_path / "q.exr")
     assert done.returncode == 2 and "inside geometry" in done.stderr
     assert not (tmp_path / "q.exr").exists() and not (tmp_path / "s.png").exists()
+
+
+def test_open_floor_radiance_follows_blenders_lamp_conventions():
+    """An open floor seen from above: radiance = albedo / pi x E x clamped cosine for a sun
+    of strength E, albedo / pi x P / (4 pi d^2) x cosine for a point lamp of power P (DESIGN.md),
+    the cosine band-limited to the panorama's SH (the exact open transfer, tests/reference.py)."""
+    scene = hemishadow.Scene()
+    scene.add_instance(scene.add_mesh(np.array([[-50, -50, 0], [50, -50, 0], [50, 50, 0], [-50, 50, 0]], np.float32),
+                                      np.array([[0, 1, 2], [0, 2, 3]])))
+    baked = pano.bake(scene, (0, 0, 1.5), size=(48, 24), bands=5, albedo=(0.8, 0.6, 0.4))
+    floor = baked.mask & (np.abs(baked.position[..., :2]).max(axis=-1) < 5)
+    assert floor.sum() > 100
+    albedo = np.array([0.8, 0.6, 0.4]) / np.pi
+    up = ref.unoccluded_transfer(np.array([[0.0, 0.0, 1.0]]), 5)[0]
+    sun = np.array([0.3, 0.2, 1.0]) / np.linalg.norm([0.3, 0.2, 1.0])
+    got = pano.relight(baked, [pano.Sun(sun, 3.0)])[floor]
+    expect = albedo * 3.0 * (up @ ref.sh_basis_reference(sun, 5))
+    assert np.abs(got / expect - 1).max() < 0.01
+    assert abs(up @ ref.sh_basis_reference(sun, 5) / sun[2] - 1) < 0.03  # the band-limited cosine is close
+    lamp = np.array([0.5, -0.4, 2.0])
+    got = pano.relight(baked, [pano.Point(lamp, 500.0)])[floor]
+    v = lamp - baked.position[floor].astype(np.float64)
+    d = np.linalg.norm(v, axis=-1)
+    cosine = np.einsum("k,nk->n", up, ref.sh_basis_reference(v / d[:, None], 5))
+    expect = albedo[None] * (500.0 / (4 * np.pi * d ** 2) * cosine)[:, None]
+    assert np.abs(got / expect - 1).max() < 0.01

@@ -10,6 +10,8 @@
 //! blocks of 8 pixels (24 interleaved values) go through AVX2 when the CPU has it, else the
 //! portable code, which performs the same IEEE operations in the same order (same bits).
 
+use std::sync::{Arc, Mutex};
+
 use rayon::prelude::*;
 
 use super::directions::{self, Rotation};
@@ -35,6 +37,9 @@ pub struct Relighter {
     position: [Vec<f32>; 3],
     hit: Vec<bool>,
     rotation: Rotation,
+    /// The background of the last environment (its SH and H*W*3 values): dragging a sun under
+    /// a fixed environment does not evaluate it again.
+    background_cache: Mutex<Option<(Vec<[f32; 3]>, Arc<Vec<f32>>)>>,
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -91,7 +96,8 @@ impl Relighter {
             Maps::U8(m) => Maps::U8(by_rows(&m, coeffs, height, width * 3)),
             Maps::F16(m) => Maps::F16(by_rows(&m, coeffs, height, width * 3)),
         };
-        Ok(Relighter { width, height, coeffs, maps, scale, offset, position: [plane(0), plane(1), plane(2)], hit, rotation })
+        Ok(Relighter { width, height, coeffs, maps, scale, offset, position: [plane(0), plane(1), plane(2)], hit, rotation,
+                       background_cache: Mutex::new(None) })
     }
 
     /// Bytes the kernel reads per relight (maps, plus positions when point lights are on).
@@ -131,13 +137,35 @@ impl Relighter {
         }
         let folded = self.fold(lighting);
         let simd = simd && Self::simd_available();
-        let (cols, rows) = (directions::columns(self.width), directions::rows(self.height));
+        let background = lighting.background.map(|sh| self.background_image(sh));
         let w3 = self.width * 3;
         out.par_chunks_mut(w3).enumerate().for_each(|(r, row)| {
             self.row(r, &folded, row, simd);
-            self.background(r, lighting.background, &rows, &cols, row);
+            let hit = &self.hit[r * self.width..(r + 1) * self.width];
+            for c in (0..self.width).filter(|&c| !hit[c]) {
+                match &background {
+                    Some(image) => row[c * 3..c * 3 + 3].copy_from_slice(&image[r * w3 + c * 3..r * w3 + c * 3 + 3]),
+                    None => row[c * 3..c * 3 + 3].fill(0.0),
+                }
+            }
         });
         Ok(())
+    }
+
+    /// The radiance of environment `sh` at every background pixel (H*W*3), cached.
+    fn background_image(&self, sh: &[[f32; 3]]) -> Arc<Vec<f32>> {
+        let mut cache = self.background_cache.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some((key, image)) = cache.as_ref() {
+            if key.as_slice() == sh {
+                return image.clone();
+            }
+        }
+        let (cols, rows) = (directions::columns(self.width), directions::rows(self.height));
+        let mut image = vec![0.0f32; self.width * self.height * 3];
+        image.par_chunks_mut(self.width * 3).enumerate().for_each(|(r, row)| self.background(r, sh, &rows, &cols, row));
+        let image = Arc::new(image);
+        *cache = Some((sh.to_vec(), image.clone()));
+        image
     }
 
     fn fold(&self, lighting: &Lighting) -> Folded {
@@ -283,17 +311,10 @@ impl Relighter {
         }
     }
 
-    /// Background pixels show `background` (radiance SH) in their direction, or black; 8 at a
-    /// time through the lane SH.
-    fn background(&self, r: usize, background: Option<&[[f32; 3]]>, rows: &[(f64, f64)], cols: &[(f64, f64)],
-                  row: &mut [f32]) {
+    /// Row r's background pixels: radiance SH `sh` in their direction, 8 at a time through the
+    /// lane SH.
+    fn background(&self, r: usize, sh: &[[f32; 3]], rows: &[(f64, f64)], cols: &[(f64, f64)], row: &mut [f32]) {
         let hit = &self.hit[r * self.width..(r + 1) * self.width];
-        let Some(sh) = background else {
-            for (c, _) in hit.iter().enumerate().filter(|(_, h)| !**h) {
-                row[c * 3..c * 3 + 3].fill(0.0);
-            }
-            return;
-        };
         let mut pending = [0usize; LANES];
         let mut count = 0;
         for c in (0..self.width).filter(|&c| !hit[c]) {
