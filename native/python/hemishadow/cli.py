@@ -32,6 +32,7 @@ def _parser() -> argparse.ArgumentParser:
         prog="hemishadow",
         description="Soft self-shadowing from environment lighting by hemispherical rasterization.")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    _add_serve_parser(sub)
     t = sub.add_parser(
         "transfer", help="compute per-vertex SH transfer of a mesh and shade it with an HDRI",
         description="Compute per-vertex spherical-harmonic transfer vectors (self-shadowed "
@@ -54,6 +55,38 @@ def _parser() -> argparse.ArgumentParser:
                         "stay as in the input file")
     _add_panorama_commands(sub)
     return parser
+
+
+def _add_serve_parser(sub) -> None:
+    s = sub.add_parser(
+        "serve", help="relight a compact panorama in the web viewer",
+        description="Serve the web viewer and a compact panorama (the panorama.json written by "
+                    "Panorama.save) on 127.0.0.1 and open it in a browser.")
+    s.add_argument("panorama", metavar="PANORAMA.json", help="the compact panorama's JSON")
+    s.add_argument("--port", type=int, default=8765, help="port (default: 8765; 0 picks a free one)")
+    s.add_argument("--no-browser", action="store_true", help="do not open a browser")
+
+
+def run_serve(args) -> int:
+    import webbrowser
+
+    from .panorama.server import make_server
+
+    try:
+        server = make_server(args.panorama, args.port)
+    except OSError as exc:
+        raise OSError(f"cannot serve on 127.0.0.1:{args.port} ({exc.strerror}); pick another with --port") from None
+    url = "http://%s:%d/" % server.server_address[:2]
+    print(f"serving {args.panorama} at {url} (Ctrl-C stops)", flush=True)
+    if not args.no_browser:
+        webbrowser.open(url)
+    try:
+        server.serve_forever()
+    except KeyboardInterrupt:
+        print("stopped")
+    finally:
+        server.server_close()
+    return 0
 
 
 def _triple_list(text: str, count: int, what: str) -> list[float]:
@@ -302,6 +335,8 @@ def _cancelled() -> int:
 def main(argv=None) -> int:
     args = _parser().parse_args(argv)
     try:
+        if args.command == "serve":
+            return run_serve(args)
         if args.command == "transfer":
             return run_transfer(args)
         if args.command in ("relight", "panorama"):
