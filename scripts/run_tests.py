@@ -38,7 +38,7 @@ TIER2_TESTS = ["tests/addon/test_package.py", "tests/addon/test_live.py", "tests
                "tests/addon/test_bake.py", "tests/addon/test_cli.py", "tests/addon/test_casters.py",
                "tests/addon/test_lightmaps.py", "tests/addon/test_lightmap_ui.py", "tests/addon/test_bake_probes.py",
                "tests/addon/test_probe_lighting.py", "tests/addon/test_probe_sources.py",
-               "tests/addon/test_probe_playback.py", "tests/addon/test_panorama_hits.py", "tests/addon/test_panorama.py",
+               "tests/addon/test_probe_playback.py", "tests/addon/test_panorama_hits.py", "tests/addon/test_panorama_bake.py",
                "tests/addon/test_panorama_cycles.py"]
 
 
