@@ -66,6 +66,14 @@ pub(crate) struct Folded {
     pub base: [f32; 3],
     /// Per point light: (light, per-map raw-value scale x intensity, per-map offset x intensity).
     pub points: Vec<(PointLight, Vec<[f32; 3]>, Vec<[f32; 3]>)>,
+    /// The same weights repeated over a block's 24 interleaved values (the portable code).
+    pub uniform_block: Vec<[f32; 3 * LANES]>,
+    pub base_block: [f32; 3 * LANES],
+    pub points_block: Vec<Vec<[f32; 3 * LANES]>>,
+}
+
+fn spread(w: &[f32; 3]) -> [f32; 3 * LANES] {
+    std::array::from_fn(|e| w[e % 3])
 }
 
 impl Relighter {
@@ -175,21 +183,23 @@ impl Relighter {
             Maps::F16(_) => (vec![[1.0; 3]; k], vec![[0.0; 3]; k]),
         };
         let times = |a: &[f32; 3], b: &[f32; 3]| [a[0] * b[0], a[1] * b[1], a[2] * b[2]];
-        let uniform = (0..k).map(|i| times(&lighting.uniform[i], &scale[i])).collect();
+        let uniform: Vec<[f32; 3]> = (0..k).map(|i| times(&lighting.uniform[i], &scale[i])).collect();
         let mut base = [0.0f32; 3];
         for i in 0..k {
             for c in 0..3 {
                 base[c] += lighting.uniform[i][c] * offset[i][c];
             }
         }
-        let points = lighting
+        let points: Vec<(PointLight, Vec<[f32; 3]>, Vec<[f32; 3]>)> = lighting
             .points
             .iter()
             .map(|p| {
                 (*p, scale.iter().map(|s| times(s, &p.intensity)).collect(), offset.iter().map(|o| times(o, &p.intensity)).collect())
             })
             .collect();
-        Folded { uniform, base, points }
+        let uniform_block = uniform.iter().map(spread).collect();
+        let points_block = points.iter().map(|(_, ws, _)| ws.iter().map(spread).collect()).collect();
+        Folded { uniform_block, base_block: spread(&base), points_block, uniform, base, points }
     }
 
     /// One row: AVX2 on whole blocks of 8 pixels when asked, the portable code elsewhere.
@@ -233,27 +243,32 @@ impl Relighter {
                 Maps::F16(m) => values[..n].iter_mut().zip(&m[start..start + n]).for_each(|(v, b)| *v = half::to_f32(*b)),
             }
         }
-        for (e, value) in out.iter_mut().enumerate() {
-            let c = e % 3;
-            let mut acc = folded.base[c];
-            for i in 0..k {
-                acc = acc + folded.uniform[i][c] * raw[i][e];
+        // Whole blocks of 24 values with the weights spread over them: loops the compiler can
+        // vectorize, each value still summed over the maps in order (the AVX2 code's bits).
+        let mut acc = folded.base_block;
+        for i in 0..k {
+            let (w, x) = (&folded.uniform_block[i], &raw[i]);
+            for e in 0..3 * LANES {
+                acc[e] = acc[e] + w[e] * x[e];
             }
-            *value = acc;
         }
         let mut t = [[0.0f32; LANES]; 25];
         let mut offsets = [0.0f32; 3 * LANES];
-        for (light, ws, wo) in &folded.points {
+        for ((light, _, wo), ws) in folded.points.iter().zip(&folded.points_block) {
             self.point_lanes(r, p, lanes, light, wo, &mut t, &mut offsets);
-            for (e, value) in out.iter_mut().enumerate() {
-                let (j, c) = (e / 3, e % 3);
-                let mut acc = 0.0f32;
-                for i in 0..k {
-                    acc = acc + (t[i][j] * ws[i][c]) * raw[i][e];
+            let mut sum = [0.0f32; 3 * LANES];
+            for i in 0..k {
+                let spread_t: [f32; 3 * LANES] = std::array::from_fn(|e| t[i][e / 3]);
+                let (w, x) = (&ws[i], &raw[i]);
+                for e in 0..3 * LANES {
+                    sum[e] = sum[e] + (spread_t[e] * w[e]) * x[e];
                 }
-                *value = *value + (acc + offsets[e]);
+            }
+            for e in 0..3 * LANES {
+                acc[e] = acc[e] + (sum[e] + offsets[e]);
             }
         }
+        out.copy_from_slice(&acc[..n]);
     }
 
     /// For a point light and up to 8 pixels: t[i][j] = f(d_j) Y_i(l_j) and the offsets' part,
