@@ -15,6 +15,7 @@ import numpy as np
 
 from .. import Cancelled
 from . import basis as frames
+from . import atlas as atlases
 from . import bounce, cells, dilate, geometry, lamps as lamp_models, light, seams, texels
 from .geometry import Surface, Target
 
@@ -170,11 +171,16 @@ def _texel_maps(tx, resolution, values, valid):
 
 
 def bake(scene, targets, *, resolution, lighting=None, suns=(), lamps=(), surfaces=(), bounces=2, samples=4, margin=2,
-         basis="hl2", offset=None, stitch_seams=True, adaptive_suns=True, lamp_points=16, progress=None):
+         basis="hl2", offset=None, stitch_seams=True, adaptive_suns=True, lamp_points=16, atlas=False,
+         progress=None):
     """Bakes lightmaps of `targets` (`Target`s) in `scene` (a `hemishadow.Scene` holding every
-    blocker); returns one dict of maps per target (see the module docstring).
+    blocker); returns one dict of maps per target (see the module docstring), or with
+    atlas=True a list of one dict: the map all targets share (`atlas.py`).
 
-    resolution: texels per side, one int for all targets or one per target.
+    resolution: texels per side, one int for all targets or one per target (atlas: one int).
+    atlas: the targets' lightmap UVs place their islands in slots of one map (they must not
+        overlap): each is filled, padded and stitched as if baked alone, and padding never
+        crosses into another target's islands.
     lighting: environment SH (K, 3), K = 1, 4, 9, 16 or 25, radiance in the project's convention
         (`hemishadow.project_environment`, the add-on's World); None: no environment.
     suns: `Sun`s (direction towards the light, strength in W/m^2, angular diameter).
@@ -193,6 +199,8 @@ def bake(scene, targets, *, resolution, lighting=None, suns=(), lamps=(), surfac
         `hemishadow.Cancelled` and nothing is returned.
     """
     targets, sizes = _targets_and_sizes(targets, resolution)
+    if atlas and len(set(sizes)) != 1:
+        raise ValueError(f"an atlas has one resolution, got {sorted(set(sizes))}")
     samples = positive_int(samples, "samples")
     margin = positive_int(margin, "margin", 0)
     bounces = positive_int(bounces, "bounces", 0)
@@ -221,9 +229,12 @@ def bake(scene, targets, *, resolution, lighting=None, suns=(), lamps=(), surfac
     masks, valid = _masks_and_valid(scene, points, ng, offset)
     valid &= usable
     r = max(sizes)
-    texel_id = np.concatenate([(k * r + g[0].texel // sz) * r + g[0].texel % sz
-                               for k, (g, sz) in enumerate(zip(geo, sizes))])  # (target, row, col) in a T x r x r grid
-    grid = (texel_id, (len(geo), r, r)) if adaptive_suns else None
+    if atlas:  # one map: (row, col) of the shared grid
+        texel_id, layers = np.concatenate([g[0].texel for g in geo]), 1
+    else:  # (target, row, col) in a T x r x r grid
+        texel_id, layers = np.concatenate([(k * r + g[0].texel // sz) * r + g[0].texel % sz
+                                           for k, (g, sz) in enumerate(zip(geo, sizes))]), len(geo)
+    grid = (texel_id, (layers, r, r)) if adaptive_suns else None
     maps, ao, sh = direct_light(scene, points, ng, lobes, lighting, direct_suns, index, offs, want_sh, offset, steps, masks,
                            texel_grid=grid, lamps=direct_lamps, lamp_points=lamp_points)
     if receivers:
@@ -239,6 +250,10 @@ def bake(scene, targets, *, resolution, lighting=None, suns=(), lamps=(), surfac
     values = np.concatenate([maps.reshape(len(points), -1)] + ([sh.reshape(len(points), -1)] if want_sh else [])
                             + [ao[:, None]], axis=1)
     ends = np.cumsum([len(g[0].texel) for g in geo])
+    if atlas:
+        parts = [(tx, values[end - len(tx.texel):end], valid[end - len(tx.texel):end], tris, uv)
+                 for (tx, *_rest, tris, uv), end in zip(geo, ends)]
+        return [_finish_atlas(parts, sizes[0], names, margin, stitch_seams, steps)]
     return [_finish(tx, r, values[end - len(tx.texel):end], valid[end - len(tx.texel):end], tris, uv, names, margin,
                     stitch_seams)
             for r, (tx, *_rest, tris, uv), end in zip(sizes, geo, ends)]
@@ -329,9 +344,31 @@ def _finish(tx, resolution, values, valid, tris, uv, names, margin, stitch_seams
     if stitch_seams:
         a, b = seams.seam_points(tris, uv, resolution)
         seams.stitch(image, known, a, b)
+    return _named(image, names, tx.coverage, had_valid)
+
+
+def _finish_atlas(parts, resolution, names, margin, stitch_seams, steps):
+    """`_finish` for targets sharing one map (`atlas.compose`); `valid` and `coverage` are
+    the union of the targets'."""
+    pieces, had_valid, coverage = [], np.zeros((resolution,) * 2, bool), np.zeros((resolution,) * 2, bool)
+    for tx, values, valid, _, _ in parts:
+        image, known = _texel_maps(tx, resolution, values, valid)
+        pieces.append((image, known, tx.island))
+        had_valid |= known
+        coverage |= tx.coverage
+        steps.step(0)
+    image, known, _ = atlases.compose(pieces, resolution, pieces[0][0].shape[2], margin)
+    if stitch_seams:
+        for _, _, _, tris, uv in parts:
+            seams.stitch(image, known, *seams.seam_points(tris, uv, resolution))
+            steps.step(0)
+    return _named(image, names, coverage, had_valid)
+
+
+def _named(image, names, coverage, had_valid):
     out = {name: np.ascontiguousarray(image[..., 3 * i:3 * i + 3]) for i, name in enumerate(names)}
     out["ao"] = np.ascontiguousarray(image[..., -1])
-    out["coverage"] = tx.coverage.astype(np.float32)
+    out["coverage"] = coverage.astype(np.float32)
     out["valid"] = had_valid
     return out
 
