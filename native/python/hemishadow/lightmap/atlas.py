@@ -24,22 +24,24 @@ def _box(island, margin):
             slice(max(cols.min() - grow, 0), min(cols.max() + grow + 1, r)))
 
 
-def _pad(image, known, island, margin):
+def _pad(image, known, island, margin, check=None):
     """Fills the island from its valid texels and pads `margin` passes; returns the pass at
     which each texel got its value (0: island, k: k-th padding pass, inf: never)."""
-    dilate.fill(image, known, island)
+    dilate.fill(image, known, island, check)
     reached = np.where(known, 0.0, np.inf)
     for k in range(1, int(margin) + 1):
+        if check is not None:
+            check()
         if not dilate.grow(image, known):
             break
         reached[known & np.isinf(reached)] = k
     return reached
 
 
-def compose(pieces, resolution, channels, margin):
+def compose(pieces, resolution, channels, margin, check=None):
     """pieces: per target (image (R, R, C) of texel means, known (R, R) texels with a valid
     sample, island (R, R) texels with a sample). Returns the atlas (R, R, C), its known texels
-    and the owner of each texel (target index, -1 for none)."""
+    and the owner of each texel (target index, -1 for none). `check`: called between passes."""
     r = int(resolution)
     atlas = np.zeros((r, r, channels), np.float32)
     best = np.full((r, r), np.inf)
@@ -49,7 +51,7 @@ def compose(pieces, resolution, channels, margin):
         if box is None:
             continue
         part, part_known = image[box].copy(), known[box].copy()
-        reached = _pad(part, part_known, island[box], margin)
+        reached = _pad(part, part_known, island[box], margin, check)
         closer = reached < best[box]
         atlas[box][closer] = part[closer]
         owner[box][closer] = k
