@@ -253,6 +253,8 @@ def bake(scene, targets, *, resolution, lighting=None, suns=(), lamps=(), surfac
     ng = np.concatenate([g[2] for g in geo])
     t, b, n = (np.concatenate([g[3][k] for g in geo]) for k in range(3))
     index = np.concatenate([g[0].index for g in geo])
+    cells.moments(setup.check)  # cached: computed once per process
+    scene.prepare()  # the engine's scene build (once per scene; it cannot be interrupted)
     setup.check()
     lobes = n[:, None] if basis != "hl2" else np.concatenate([n[:, None], frames.hl2_world(t, b, n)], axis=1)
     setup.check()
