@@ -53,7 +53,7 @@ def _gathered(scene, points, normals, offset, progress, steps):
         g = scene.gather(points, normals, bands=BANDS, offset=offset, progress=progress)
         return lobe_irradiance(g, normals[:, None])[:, 0]
     out = np.empty((len(points), 3), np.float32)
-    for s in steps.chunks(len(points)):
+    for s in steps.chunks(len(points), least=1024):
         g = scene.gather(points[s], normals[s], bands=BANDS, offset=offset)
         out[s] = lobe_irradiance(g, normals[s][:, None])[:, 0]
     return out
