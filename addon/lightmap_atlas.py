@@ -10,6 +10,8 @@ kept up to date with Blender. `hemishadow_lightmap` is the baker's layer and is 
 each atlas bake; the user's UV maps, and which map is active or renders, never change.
 """
 
+import contextlib
+
 import bpy
 import numpy as np
 
@@ -87,6 +89,21 @@ class _EditMode:
         return False
 
 
+@contextlib.contextmanager
+def _object_mode():
+    """Object Mode for the duration (mesh data is only current there); the user's mode
+    (Edit Mode, Sculpt, ...) back afterwards."""
+    active = bpy.context.view_layer.objects.active
+    mode = active.mode if active is not None else "OBJECT"
+    if mode != "OBJECT":
+        bpy.ops.object.mode_set(mode="OBJECT")
+    try:
+        yield
+    finally:
+        if mode != "OBJECT" and bpy.context.view_layer.objects.active == active:
+            bpy.ops.object.mode_set(mode=mode)
+
+
 def _unique_meshes(objects):
     seen, out = set(), []
     for obj in objects:
@@ -102,6 +119,11 @@ def layout(objects, source_uv, margin):
     fraction of the square) between islands. Returns nothing; only ATLAS_UV changes."""
     owners = _unique_meshes(objects)
     meshes = [o.data for o in owners]
+    with _object_mode():
+        _layout(owners, meshes, source_uv, margin)
+
+
+def _layout(owners, meshes, source_uv, margin):
     states = _layer_states(meshes)
     try:
         bare = _seed(meshes, source_uv)
