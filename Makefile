@@ -1,5 +1,5 @@
 # Entry points for a fresh machine: `make demo` and `make test` install everything first.
-.PHONY: setup setup-all demo demo-lightmaps demo-probes demo-cli test test-platforms clean extension extensions
+.PHONY: setup setup-all demo demo-lightmaps demo-probes demo-panorama demo-cli test test-platforms clean extension extensions
 
 PY := .venv/bin/python
 
@@ -30,6 +30,13 @@ demo-lightmaps: setup
 demo-probes: setup
 	$(PY) scripts/build_extension.py --if-stale
 	$(PY) scripts/demo_probes.py
+
+# A relightable panorama (issue 13): baked once from a point of a small scene, relit under a
+# sky, two suns and a point lamp without the scene, beside Cycles' renders of the same lights:
+# out/demo_panorama/relit_*.png and vs_cycles_*.png (scripts/demo_panorama.py).
+demo-panorama: setup
+	$(PY) scripts/build_extension.py --if-stale
+	$(PY) scripts/demo_panorama.py
 
 # The engine alone from the command line: spot.obj (ships in tests/assets) lit by Blender's
 # "forest" HDRI (ships with the bpy module), written to out/spot.glb and out/spot.npz.

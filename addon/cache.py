@@ -41,7 +41,7 @@ import numpy as np
 import bpy
 from bpy.app.handlers import persistent
 
-from . import casters, mesh_io, staleness
+from . import casters, mesh_io, probe_lighting, probes, staleness
 
 __all__ = [
     "BakeCache", "DEFAULT_DIRECTORY", "HANDLERS", "apply_cached", "baking", "cache_path", "check_directory", "clear",
@@ -291,6 +291,11 @@ def _why_invalid(obj, scene, frame: int, cache: BakeCache | None, depsgraph=None
     stale = _stale_reason(obj, scene, frame, cache, depsgraph, recheck)
     if stale is not None:
         return f"the bake cache is stale: {stale}"
+    volume = probe_lighting.volume_of(obj)
+    if volume is not None and cache.transfer is None:
+        return "Probe Lighting shades the cache's transfer vectors and this cache holds none: bake it again"
+    if volume is not None and probes.PROP + "positions" not in volume:  # (probes.stored, without reading it)
+        return f"its probe volume '{volume.name}' holds no baked probes"
     if cache.transfer is None and not _same_shading(cache, obj, scene):
         return "the lighting or albedo changed and the cache holds no transfer vectors to re-shade"
     return None
@@ -431,7 +436,10 @@ def _albedo(obj) -> np.ndarray:
 
 
 def _same_shading(cache: BakeCache, obj, scene) -> bool:
-    """Lighting and albedo as at the bake: the cached radiance can be copied as it is."""
+    """Lighting and albedo as at the bake: the cached radiance can be copied as it is. Never
+    under Probe Lighting: its light depends on where the object is on each frame."""
+    if probe_lighting.volume_of(obj) is not None:
+        return False
     stored = np.asarray(cache.meta.get("lighting"), np.float32)
     current = _current_lighting(scene, int(round(np.sqrt(stored.shape[0]))))
     from . import lamps
@@ -491,7 +499,11 @@ def _reshade(obj, scene, cache: BakeCache, i: int) -> np.ndarray:
     from . import evaluated, lamps
 
     transfer = cache.transfer[i].astype(np.float32)
-    lighting = _current_lighting(scene, int(round(np.sqrt(transfer.shape[1]))))
+    bands = int(round(np.sqrt(transfer.shape[1])))
+    if probe_lighting.volume_of(obj) is not None:  # the grid's light where the object is now, as live
+        vertices, _, _ = mesh_io.read_evaluated(obj, evaluated.depsgraph())
+        return hemishadow.shade(transfer, probe_lighting.lighting(obj, scene, vertices, bands), _albedo(obj))
+    lighting = _current_lighting(scene, bands)
     radiance = hemishadow.shade(transfer, lighting, _albedo(obj))
     found = lamps.scene_lamps(scene)
     if found:   # lamps light each vertex from where it is this frame

@@ -48,7 +48,8 @@ def build_parser() -> argparse.ArgumentParser:
         "  ... bake --help\n"
         "progress goes to stderr; Ctrl-C cancels and saves nothing\n"
         "exit codes: 0 done, 1 the work failed, 2 bad command line, 130 cancelled"))
-    commands = parser.add_subparsers(dest="command", metavar="{compute,bake,lightmaps,probes}", parser_class=_Parser)
+    commands = parser.add_subparsers(dest="command", metavar="{compute,bake,lightmaps,probes,panorama}",
+                                     parser_class=_Parser)
 
     compute = commands.add_parser("compute", help="compute one frame into the attributes",
                                   description="Compute one frame into the attributes hemishadow_radiance and "
@@ -74,6 +75,9 @@ def build_parser() -> argparse.ArgumentParser:
     from . import probes_cli
 
     probes_cli.add_parser(commands)
+    from . import panorama_cli
+
+    panorama_cli.add_parser(commands)
     return parser
 
 
@@ -94,8 +98,8 @@ def main(argv) -> int:
         scene = _scene(args.scene)
         if args.command == "lightmaps":
             return _lightmaps(scene, args)
-        if args.command == "probes":
-            return _probes(scene, args)
+        if args.command in ("probes", "panorama"):
+            return _baker(scene, args)
         objects = _objects(scene, args.objects)
         run = _compute if args.command == "compute" else _bake
         if not run(scene, objects, args):
@@ -238,15 +242,17 @@ def _lightmaps(scene, args) -> int:
     return 0
 
 
-def _probes(scene, args) -> int:
+def _baker(scene, args) -> int:
+    """A baker's subcommand (probes_cli, panorama_cli): its `run` with a progress bar."""
+    import importlib
+
     import hemishadow
 
-    from . import probes_cli
-
-    bar, interrupts = _progress_bar("probes")
+    module = importlib.import_module(f"{__package__}.{args.command}_cli")
+    bar, interrupts = _progress_bar(args.command)
     with interrupts:
         try:
-            probes_cli.run(scene, args, lambda m: UsageError(f"{PROG}: error: {m}"), bar)
+            module.run(scene, args, lambda m: UsageError(f"{PROG}: error: {m}"), bar)
         except hemishadow.Cancelled:
             print("hemishadow: cancelled (Ctrl-C): nothing written", file=sys.stderr)
             return 130

@@ -5,7 +5,9 @@ as usual, so it keeps its own soft shadows under the light of the place it stand
 
 The probes hold the World and the lamps as they were baked, so the scene's lamps are not
 added again for such an object. Evaluation drops probes the point cannot see (the static
-geometry of the bake, kept here per volume), so light does not leak through walls."""
+geometry of the bake, kept here per volume), so light does not leak through walls. A cached
+object (cache.py) is shaded the same way from its cached transfer, and a new bake of the
+probes re-shades the objects it lights at once (`reshade_users`)."""
 
 import numpy as np
 
@@ -54,6 +56,33 @@ def _probes_of(volume, scene):
         _, _, world = probes.scene_geometry(scene)  # the static geometry the probes saw
         known = _baked[volume.session_uid] = (digest, data, world)
     return known[1], known[2]
+
+
+def users(scene, volume):
+    """The enabled objects of the scene that take their light from `volume`."""
+    from . import engine_bridge
+
+    return [o for o in engine_bridge.enabled_objects(scene) if volume_of(o) == volume]
+
+
+def reshade_users(scene, volume):
+    """After the volume's probes changed (a bake): its objects shaded with their new light
+    now, not on the next frame: from their cache when one serves this frame (re-shading its
+    transfer), else from their last live transfer. Only while Live is on, as on a frame
+    change; errors go to the objects' status."""
+    from . import cache, engine_bridge
+
+    if not scene.hemishadow.live or cache.is_baking():
+        return
+    live = []
+    for obj in users(scene, volume):
+        try:
+            if not cache.handled(obj, scene):
+                live.append(obj)
+        except (ValueError, RuntimeError, OSError) as error:
+            engine_bridge.set_status(obj, f"bake cache not used: {error}")
+            live.append(obj)
+    engine_bridge.reshade_scene(scene, live)
 
 
 def forget():

@@ -3,10 +3,12 @@ Light Probe Volume (or in an Empty's bounds, or at given points) through `hemish
 
 Blockers and bounce surfaces are the visible, renderable meshes (`lightmaps.blockers`),
 except objects with hemishadow enabled: they are live-shaded (characters, props that move)
-and take their light from the grid instead of being baked into it. Light: the World's SH and
-sun lamps as the lightmap bake reads them (`lightmaps.lighting_of`, `suns_of`); albedo and
-emission from the Principled BSDF's input values. Results go to an .npz file (plus .json
-beside it) and onto the volume object (custom properties `hemishadow_probe_*`).
+and take their light from the grid instead of being baked into it. Light: the World's SH,
+sun, point, spot and area lamps as the lightmap bake reads them (`lightmaps.lighting_of`,
+`suns_of`, `lamps_of`); albedo and emission from the Principled BSDF's input values; the
+bounce light of surfaces with baked lightmaps from those (probe_lightmaps.py). Results go
+to an .npz file (plus .json beside it) and onto the volume object (custom properties
+`hemishadow_probe_*`); the objects the volume lights are re-shaded at once.
 """
 
 from __future__ import annotations
@@ -16,7 +18,7 @@ import os
 import bpy
 import numpy as np
 
-from . import lightmaps
+from . import lightmaps, probe_lightmaps
 
 PROP = "hemishadow_probe_"
 EMPTY_RESOLUTION = (4, 4, 4)
@@ -49,15 +51,16 @@ def active_volume(context):
     return None
 
 
-def scene_geometry(scene, depsgraph=None):
-    """(hemishadow.Scene, Surfaces, world triangles (M, 3, 3)) of the bake's meshes."""
+def scene_geometry(scene, depsgraph=None, *, live=False, purpose="bake probes against"):
+    """(hemishadow.Scene, Surfaces, world triangles (M, 3, 3)) of the bake's meshes; objects
+    with hemishadow enabled only when `live` (the panorama sees them; the probes light them)."""
     import hemishadow
     import hemishadow.lightmap as lm
 
     depsgraph = depsgraph or bpy.context.evaluated_depsgraph_get()
     engine_scene, surfaces, world = hemishadow.Scene(), [], []
     for obj in lightmaps.blockers(scene):
-        if getattr(getattr(obj, "hemishadow", None), "enabled", False):
+        if not live and getattr(getattr(obj, "hemishadow", None), "enabled", False):
             continue  # live-shaded: lit by the grid, not part of it
         data = lightmaps.read_mesh(obj, depsgraph, albedo=True)
         if not len(data.triangles):
@@ -70,7 +73,7 @@ def scene_geometry(scene, depsgraph=None):
         placed = data.vertices.astype(np.float64) @ matrix[:3, :3].T + matrix[:3, 3]
         world.append(placed[data.triangles])
     if not surfaces:
-        raise ValueError(f"scene {scene.name!r} has no visible, renderable mesh to bake probes against")
+        raise ValueError(f"scene {scene.name!r} has no visible, renderable mesh to {purpose}")
     return engine_scene, surfaces, np.concatenate(world)
 
 
@@ -92,8 +95,9 @@ def bake_probes(scene, volume=None, points=None, *, bounces=2, resolution=None, 
     if (volume is None) == (points is None):
         raise ValueError("give a volume object or points, not both or neither")
     engine_scene, surfaces, world = scene_geometry(scene)
-    kwargs = dict(lighting=lightmaps.lighting_of(scene), suns=lightmaps.suns_of(scene), surfaces=surfaces,
-                  bounces=bounces, progress=progress)
+    baked = probe_lightmaps.vertex_light(scene, surfaces) if bounces else {}
+    kwargs = dict(lighting=lightmaps.lighting_of(scene), suns=lightmaps.suns_of(scene), lamps=lightmaps.lamps_of(scene),
+                  surfaces=surfaces, bounces=bounces, lightmaps=baked, progress=progress)
     if volume is not None:
         matrix, res = grid_of(volume, resolution)
         result = hp.bake_grid(engine_scene, matrix, res, **kwargs)
@@ -106,6 +110,9 @@ def bake_probes(scene, volume=None, points=None, *, bounces=2, resolution=None, 
         hp.write_json(os.path.splitext(path)[0] + ".json", result)
     if store and volume is not None:
         store_on(volume, result)
+        from . import probe_lighting  # (it reads the probes through this module)
+
+        probe_lighting.reshade_users(scene, volume)
     return result, path
 
 
@@ -113,6 +120,8 @@ def _notes(volume, result, world):
     """What the user should know about a bake that went through: probes left out, a volume
     with no geometry inside (its probes see the sky only)."""
     notes = []
+    if result.get("lightmapped"):
+        notes.append(f"bounce light from the baked lightmaps of {len(result['lightmapped'])} object(s)")
     bad = int((~result["valid"]).sum())
     if bad:
         notes.append(f"{bad} probe(s) inside geometry, left out of interpolation")

@@ -412,7 +412,11 @@ def scenes_section():
     return ["## Scenes\n",
             "Many objects and instances seen from arbitrary receivers (`hemishadow.Scene`, issue 10), measured by "
             "`bench/scene.py` in a run of its own (also on [benchmarks_scene.md](benchmarks_scene.md)):\n",
-            "\n".join(lines)]
+            "\n".join(lines), PANORAMA_LINE]
+
+
+PANORAMA_LINE = ("\nPanorama relighting (issue 13): relights per second, GB/s, file sizes and 8-bit error on "
+                 "[benchmarks_panorama.md](benchmarks_panorama.md), measured by `bench/panorama_relight.py`.")
 
 
 def main(path=None, write_docs=None):

@@ -267,7 +267,8 @@ def inputs() -> list[pathlib.Path]:
     """Every file the zip is built from."""
     files = [MANIFEST, REQUIREMENTS, pathlib.Path(__file__).resolve()]
     files += [p for p in ADDON.rglob("*") if p.is_file() and "__pycache__" not in p.parts]
-    for pattern in ("**/*.rs", "**/Cargo.toml", "Cargo.lock", "pyproject.toml", "python/**/*.py"):
+    # python/**/web/*: the panorama web viewer's page and scripts, which the wheel carries too.
+    for pattern in ("**/*.rs", "**/Cargo.toml", "Cargo.lock", "pyproject.toml", "python/**/*.py", "python/**/web/*"):
         files += [p for p in NATIVE.glob(pattern) if "target" not in p.relative_to(NATIVE).parts]
     return files
 

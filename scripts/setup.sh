@@ -86,6 +86,21 @@ check_rust() {
     say "rust: rustc $have"
 }
 
+# Headless Chromium for the web viewer's test (tests/test_panorama_web.py: WebGL2 on its SwiftShader).
+check_chromium() {
+    local found
+    found="$(command -v chromium || command -v chromium-browser || true)"
+    if [ -z "$found" ] && command -v apt-get >/dev/null; then
+        apt_install chromium
+        found="$(command -v chromium || true)"
+    fi
+    if [ -n "$found" ]; then
+        say "chromium: $("$found" --version 2>/dev/null | head -n1)"
+    else
+        say "chromium not found and no apt-get: the web viewer's test skips (and fails with CI=true)"
+    fi
+}
+
 install_requirements() {  # install_requirements DIR FILE
     local dir="$1" file="$2" stamp="$1/.requirements.sha256" want
     want="$(sha256sum "$file" | cut -d' ' -f1)"
@@ -155,6 +170,7 @@ esac
 
 make_venv "$VENV" "$PRIMARY_PYTHON"
 check_rust
+check_chromium
 install_requirements "$VENV" requirements.txt
 build_engine
 if [ "$ALL" = 1 ]; then

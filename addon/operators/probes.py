@@ -6,7 +6,7 @@ yet, as Bake Lightmaps); files are written only once every probe is baked.
 
 import bpy
 
-from .. import probes
+from .. import probe_lighting, probes
 
 
 def _volume(context):
@@ -70,6 +70,8 @@ class HEMISHADOW_OT_probe_preview(bpy.types.Operator):
         except ValueError as error:
             self.report({"ERROR"}, str(error))
             return {"CANCELLED"}
+        # the probes shown are the ones stored (an undo may have brought older ones back)
+        probe_lighting.reshade_users(context.scene, volume)
         return {"FINISHED"}
 
 

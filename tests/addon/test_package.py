@@ -215,3 +215,18 @@ def test_command_line_install(package, tmp_path):
     assert facts["code"] == 0, output
     assert facts["after"] == [True, True, True], output
     assert facts["operators"], output
+
+
+def test_engine_wheel_holds_the_panorama_web_viewer(package):
+    """`python -m hemishadow serve` needs the viewer's page and scripts beside the server in the wheel."""
+    import io
+
+    path, _ = package
+    with zipfile.ZipFile(path) as archive:
+        (wheel,) = [n for n in archive.namelist() if pathlib.PurePosixPath(n).name.startswith("hemishadow-")]
+        with zipfile.ZipFile(io.BytesIO(archive.read(wheel))) as inner:
+            names = set(inner.namelist())
+    web = ROOT / "native" / "python" / "hemishadow" / "panorama" / "web"
+    expected = {f"hemishadow/panorama/web/{p.name}" for p in web.iterdir() if p.is_file()}
+    assert len(expected) >= 5 and expected <= names, sorted(expected - names)
+    assert "hemishadow/panorama/server.py" in names

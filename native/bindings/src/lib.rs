@@ -13,6 +13,7 @@ use pyo3::exceptions::{PyException, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyBool;
 
+mod panorama;
 mod scene;
 
 create_exception!(_native, Cancelled, PyException, "The computation was stopped by its progress callback.");
@@ -396,6 +397,8 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(disk_cells, m)?)?;
     m.add_class::<PySolver>()?;
     m.add_class::<scene::PyScene>()?;
+    m.add_function(wrap_pyfunction!(panorama::panorama_hits, m)?)?;
+    m.add_class::<panorama::PyRelighter>()?;
     m.add("Cancelled", m.py().get_type::<Cancelled>())?;
     m.add("DEFAULT_TABLE_RESOLUTION", engine::plane_table::DEFAULT_RESOLUTION)?;
     m.add("MASK_SIDE", engine::disk_mask::MASK_SIDE)?;

@@ -13,6 +13,7 @@ pub mod error;
 pub mod hierarchy;
 pub mod integrate;
 pub mod mesh;
+pub mod panorama;
 pub mod packets;
 pub mod plane_table;
 pub mod progress;

@@ -15,6 +15,11 @@ pub struct Affine {
     pub facing: f32,
     /// Largest singular value of `linear` (a sphere of radius r maps into one of radius r * stretch).
     pub stretch: f32,
+    /// Rows of the inverse of `linear` (world to mesh space, less the translation).
+    pub inverse: [Vec3; 3],
+    /// A lower bound of the smallest singular value of `linear`: mesh-space distances times
+    /// `shrink` bound world distances from below.
+    pub shrink: f32,
 }
 
 impl Affine {
@@ -23,6 +28,8 @@ impl Affine {
         translation: [0.0; 3],
         facing: 1.0,
         stretch: 1.0,
+        inverse: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+        shrink: 1.0,
     };
 
     /// From 16 row-major values; the last row must be (0, 0, 0, 1) and the linear part invertible.
@@ -41,12 +48,22 @@ impl Affine {
         if !(det.abs() > 1e-12 * scale.powi(3)) {
             return Err(Error::invalid("matrix must be invertible (its 3x3 part has a zero determinant)"));
         }
+        let inverse = invert(&l, det);
         Ok(Affine {
             linear: l.map(|r| r.map(|v| v as f32)),
             translation: [m[3] as f32, m[7] as f32, m[11] as f32],
             facing: if det < 0.0 { -1.0 } else { 1.0 },
             stretch: largest_singular_value(&l) as f32,
+            inverse: inverse.map(|r| r.map(|v| v as f32)),
+            shrink: (1.0 / largest_singular_value(&inverse)) as f32,
         })
+    }
+
+    /// A world point in mesh space.
+    #[inline(always)]
+    pub fn unapply(&self, p: Vec3) -> Vec3 {
+        let d = crate::mesh::sub(p, self.translation);
+        self.inverse.map(|r| r[0] * d[0] + r[1] * d[1] + r[2] * d[2])
     }
 
     #[inline(always)]
@@ -67,6 +84,15 @@ impl Affine {
         }
         out
     }
+}
+
+/// The inverse of a 3x3 matrix of determinant `det` (the adjugate over the determinant).
+fn invert(l: &[[f64; 3]; 3], det: f64) -> [[f64; 3]; 3] {
+    let c = |r: usize, k: usize| {
+        let (r1, r2, k1, k2) = ((r + 1) % 3, (r + 2) % 3, (k + 1) % 3, (k + 2) % 3);
+        l[r1][k1] * l[r2][k2] - l[r1][k2] * l[r2][k1]
+    };
+    [0, 1, 2].map(|i| [0, 1, 2].map(|j| c(j, i) / det))
 }
 
 /// sqrt of the largest eigenvalue of L^T L by power iteration (converges fast for 3x3).
@@ -107,6 +133,22 @@ mod tests {
         assert_eq!(a.facing, -1.0);
         assert!((a.stretch - 2.0).abs() < 0.01);
         assert_eq!(a.apply([1.0, 1.0, 1.0]), [-1.0, 3.0, 4.0]);
+        assert!((a.shrink - 1.0).abs() < 0.01 && a.shrink <= 1.0);
+    }
+
+    #[test]
+    fn unapply_inverts_apply_and_shrink_bounds_distances() {
+        let a = Affine::from_rows(&rows([[0.0, -3.0, 0.0], [0.5, 0.0, 0.2], [0.0, 0.0, 2.0]], [1.0, -2.0, 0.5])).unwrap();
+        for p in [[0.3f32, -1.0, 2.0], [5.0, 0.0, -4.0], [0.0, 0.0, 0.0]] {
+            let q = a.unapply(a.apply(p));
+            assert!((0..3).all(|k| (q[k] - p[k]).abs() < 1e-5), "{p:?} -> {q:?}");
+        }
+        // Unit mesh-space steps never map shorter than `shrink`.
+        for d in [[1.0f32, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [0.6, 0.0, 0.8], [-0.2, 0.6, 0.77]] {
+            let (o, w) = (a.apply([0.0; 3]), a.apply(d));
+            let len = crate::mesh::length(crate::mesh::sub(w, o)) / crate::mesh::length(d);
+            assert!(len >= a.shrink * 0.999, "{d:?}: {len} < {}", a.shrink);
+        }
     }
 
     #[test]

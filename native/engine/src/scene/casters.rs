@@ -132,7 +132,7 @@ impl Casters<'_> {
         };
         let scene = self.scene;
         let top = scene.top.as_ref().expect("prepared by Scene::casters");
-        let walk = Walk { trees: &self.trees, positions: &self.positions, instances: &scene.instances, top, lod: scene.lod, exclude: skip };
+        let walk = Walk { trees: &self.trees, positions: &self.positions, instances: &scene.instances, top, lod: scene.lod, exclude: skip, near_proxies: true };
         let mut sink = MaskSink::new(table, self.full);
         walk.run(&world, scratch, &mut sink);
         sink.finish_raw()

@@ -96,6 +96,12 @@ pub struct MeshTree {
     pub bounds: Vec<[Vec3; 2]>,
     /// Per node, the centre of its box and half its diagonal.
     pub spheres: Vec<[f32; 4]>,
+    /// Per node, a slab holding its triangles: a unit normal (its proxy's mean), the offset
+    /// of its mid-plane along it, and half its thickness (infinite where no normal exists).
+    /// Rigid motions keep it, so distances to it do not depend on how a mesh is placed.
+    pub slabs: Vec<[f32; 5]>,
+    /// Per node, the range of `leaves` below it (a pre-order tree keeps them contiguous).
+    leaf_span: Vec<(u32, u32)>,
     pub largest_compact: usize,
 }
 
@@ -130,6 +136,7 @@ impl MeshTree {
             from = tris;
         }
         let largest_compact = leaves.iter().chain(&proxies).map(|c| c.vertices.len()).max().unwrap_or(0);
+        let leaf_span = leaf_spans(&nodes);
         let mut tree = MeshTree {
             nodes,
             leaves,
@@ -141,6 +148,8 @@ impl MeshTree {
             coarse_positions: Vec::new(),
             bounds: Vec::new(),
             spheres: Vec::new(),
+            slabs: Vec::new(),
+            leaf_span,
             largest_compact,
         };
         tree.refit(positions);
@@ -167,6 +176,29 @@ impl MeshTree {
         }
         self.spheres = bounds.iter().map(sphere_of).collect();
         self.bounds = bounds;
+        self.slabs = (0..self.nodes.len()).into_par_iter().map(|n| self.slab(n, positions)).collect();
+    }
+
+    /// Node `n`'s slab (see `slabs`) around the vertices of the leaves below it.
+    fn slab(&self, n: usize, positions: &[Vec3]) -> [f32; 5] {
+        let proxy = &self.proxies[n];
+        let mut sum = [0.0f32; 3];
+        for t in &proxy.triangles {
+            let [a, b, c] = t.map(|k| positions[proxy.vertices[k as usize] as usize]);
+            sum = crate::mesh::add(sum, crate::rasterizer::cross(crate::mesh::sub(b, a), crate::mesh::sub(c, a)));
+        }
+        let Some(normal) = crate::mesh::normalize(sum) else {
+            return [0.0, 0.0, 1.0, 0.0, f32::INFINITY];
+        };
+        let (first, end) = self.leaf_span[n];
+        let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+        for leaf in &self.leaves[first as usize..end as usize] {
+            for &v in &leaf.vertices {
+                let h = crate::rasterizer::dot(normal, positions[v as usize]);
+                (lo, hi) = (lo.min(h), hi.max(h));
+            }
+        }
+        [normal[0], normal[1], normal[2], 0.5 * (lo + hi), 0.5 * (hi - lo)]
     }
 
     pub fn triangle_count(&self) -> usize {
@@ -218,6 +250,20 @@ fn split(
     let r = split(centroids, right, offset + mid, nodes, leaves, ranges);
     nodes[id as usize].children = [l, r];
     id
+}
+
+/// Per node, the range of leaf indices below it (nodes in pre-order, parents first).
+fn leaf_spans(nodes: &[Node]) -> Vec<(u32, u32)> {
+    let mut span = vec![(0u32, 0u32); nodes.len()];
+    for n in (0..nodes.len()).rev() {
+        let node = nodes[n];
+        span[n] = if node.children[0] == NO_CHILD {
+            (node.leaf, node.leaf + 1)
+        } else {
+            (span[node.children[0] as usize].0, span[node.children[1] as usize].1)
+        };
+    }
+    span
 }
 
 /// A proxy's vertices moved `error` along the area-weighted normals of the proxy's triangles.

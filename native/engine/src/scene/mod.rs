@@ -21,6 +21,7 @@ pub mod receivers;
 pub mod segments;
 pub mod top;
 pub mod traverse;
+pub mod world;
 
 use std::sync::atomic::{AtomicU64, Ordering};
 
@@ -327,7 +328,7 @@ impl Scene {
         let quadrature = Quadrature::new(downsample, basis);
         let k = quadrature.basis().coeffs();
         let (trees, positions) = self.walk_parts();
-        let walk = Walk { trees: &trees, positions: &positions, instances: &self.instances, top: self.top.as_ref().expect("prepared"), lod: self.lod, exclude: &[] };
+        let walk = Walk { trees: &trees, positions: &positions, instances: &self.instances, top: self.top.as_ref().expect("prepared"), lod: self.lod, exclude: &[], near_proxies: false };
         let full = disk();
         let counted = AtomicU64::new(0);
         let mut out = vec![0.0f32; points.len() * k];
@@ -351,7 +352,7 @@ impl Scene {
         let offset = receivers::offset(offset, self.size())?;
         let table = PlaneTable::shared(self.table_resolution)?;
         let (trees, positions) = self.walk_parts();
-        let walk = Walk { trees: &trees, positions: &positions, instances: &self.instances, top: self.top.as_ref().expect("prepared"), lod: self.lod, exclude: &[] };
+        let walk = Walk { trees: &trees, positions: &positions, instances: &self.instances, top: self.top.as_ref().expect("prepared"), lod: self.lod, exclude: &[], near_proxies: false };
         let full = disk();
         Ok(points
             .par_iter()
@@ -406,7 +407,7 @@ impl Scene {
         let offset = receivers::offset(offset, self.size())?;
         let table = PlaneTable::shared(self.table_resolution)?;
         let (trees, positions) = self.walk_parts();
-        let walk = Walk { trees: &trees, positions: &positions, instances: &self.instances, top: self.top.as_ref().expect("prepared"), lod: self.lod, exclude: &[] };
+        let walk = Walk { trees: &trees, positions: &positions, instances: &self.instances, top: self.top.as_ref().expect("prepared"), lod: self.lod, exclude: &[], near_proxies: false };
         let radiance: Vec<Option<&[Rgb]>> = vec![None; self.instances.len()];
         Ok(points
             .par_iter()
@@ -429,7 +430,7 @@ impl Scene {
         let offset = receivers::offset(offset, self.size())?;
         let table = PlaneTable::shared(self.table_resolution)?;
         let (trees, positions) = self.walk_parts();
-        let walk = Walk { trees: &trees, positions: &positions, instances: &self.instances, top: self.top.as_ref().expect("prepared"), lod: self.lod, exclude: &[] };
+        let walk = Walk { trees: &trees, positions: &positions, instances: &self.instances, top: self.top.as_ref().expect("prepared"), lod: self.lod, exclude: &[], near_proxies: false };
         let radiance = self.radiance_by_instance();
         let k = projector.coeffs();
         let mut out = vec![0.0f32; points.len() * k * 3];

@@ -1,9 +1,10 @@
 //! One receiver's walk through the scene hierarchy: instances below its horizon are culled by
 //! their world boxes (top tree), then inside each instance's mesh tree a node is culled when
 //! its box lies below the horizon, drawn through its proxy when its bounding sphere subtends
-//! less than `lod` (radius / distance) as seen from the receiver or when the receiver is
-//! outside it and the proxy's simplification error subtends less than `lod` x ERROR_SHARE,
-//! and opened otherwise; leaves
+//! less than `lod` (radius / distance) as seen from the receiver, or when the proxy's
+//! simplification error subtends less than `lod` x ERROR_SHARE (seen from the node's centre
+//! when the receiver is outside its sphere, or, for masks, from the nearest point of the slab
+//! holding its triangles), and opened otherwise; leaves
 //! that are still close are drawn at full resolution. The receiver never leaves world space
 //! for the tests: each instance gets one 3x4 matrix from mesh space straight into the
 //! receiver's tangent frame, so instances share their geometry and nothing is copied.
@@ -56,12 +57,18 @@ pub struct Walk<'a> {
     pub lod: f32,
     /// Instances left out (ascending ids): a solver's own object, which it shadows itself.
     pub exclude: &'a [u32],
+    /// Also draw a node through its proxy when its error is small from the nearest point of
+    /// its slab (see `instance`). For masks only: a proxy's few vertices would blur radiance.
+    pub near_proxies: bool,
 }
 
 /// A mesh-space to receiver-space map: rows of (frame x linear), and the translation.
 struct Local {
     rows: [Vec3; 3],
     shift: Vec3,
+    /// The receiver in mesh space, and the square of the instance's `shrink`.
+    at: Vec3,
+    shrink2: f32,
 }
 
 impl Local {
@@ -70,12 +77,19 @@ impl Local {
         let l = &t.linear;
         let rows = f.map(|fr| [0, 1, 2].map(|c| fr[0] * l[0][c] + fr[1] * l[1][c] + fr[2] * l[2][c]));
         let d = crate::mesh::sub(t.translation, receiver.origin);
-        Local { rows, shift: f.map(|fr| dot(fr, d)) }
+        Local { rows, shift: f.map(|fr| dot(fr, d)), at: t.unapply(receiver.origin), shrink2: t.shrink * t.shrink }
     }
 
     #[inline(always)]
     fn apply(&self, p: Vec3) -> Vec3 {
         [0, 1, 2].map(|r| dot(self.rows[r], p) + self.shift[r])
+    }
+
+    /// A lower bound of the squared distance from the receiver to anything in a node's slab.
+    #[inline(always)]
+    fn slab_distance2(&self, slab: &[f32; 5]) -> f32 {
+        let gap = (dot([slab[0], slab[1], slab[2]], self.at) - slab[3]).abs() - slab[4];
+        gap.max(0.0).powi(2) * self.shrink2
     }
 
     /// Whether a mesh-space box lies on or below the receiver's horizon.
@@ -156,7 +170,11 @@ impl Walk<'_> {
             let q = local.apply([s[0], s[1], s[2]]);
             let (d2, r2) = (dot(q, q), s[3] * s[3] * stretch2);
             let e = tree.proxy_error[n];
-            let far = r2 < d2 && (r2 < lod2 * d2 || e * e * stretch2 < error2 * d2);
+            // Near or inside the sphere, the slab's nearest point bounds the distance: flat
+            // parts (a floor under a cloth) stay proxies however close the receiver is.
+            let small = e * e * stretch2 < error2 * d2;
+            let far = (r2 < d2 && (r2 < lod2 * d2 || small))
+                || (self.near_proxies && small && e * e * stretch2 < error2 * local.slab_distance2(&tree.slabs[n]));
             let node = tree.nodes[n];
             let leaf = node.children[0] == NO_CHILD;
             if far {

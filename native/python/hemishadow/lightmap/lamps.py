@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .. import sh_basis
 from . import basis, cells
 
 SHAPES = ("SQUARE", "RECTANGLE", "DISK", "ELLIPSE")
@@ -173,10 +174,10 @@ def spot_mask(lamp, axis):
     return x * x * (3 - 2 * x)
 
 
-def lamp_light(scene, lamp, points, ng, lobes, index, offsets, lamp_points, offset, want_sh=False):
+def lamp_light(scene, lamp, points, ng, lobes, index, offsets, lamp_points, offset, want_sh=False, sh_bands=2):
     """Irradiance / pi (P, L, 3) of one lamp on lobes (P, L, 3) of receiver samples at
     `points` with geometric normals `ng`, shadowed by the scene (exact segments), and its
-    L1 SH (P, 4, 3) / pi or None."""
+    SH (P, sh_bands^2, 3) / pi (L1 by default; the probes ask for bands 0-2) or None."""
     pts, factor = samples(lamp, points, index, offsets, lamp_points)
     p, n = factor.shape
     to_lamp = pts - points[:, None]
@@ -193,7 +194,11 @@ def lamp_light(scene, lamp, points, ng, lobes, index, offsets, lamp_points, offs
     maps = np.einsum("pln,pn->pl", cosine, weight)[..., None] * lamp.power / np.pi
     sh = None
     if want_sh:
-        y = np.stack([np.full((p, n), basis.Y00), -basis.C1 * w[..., 1], basis.C1 * w[..., 2], -basis.C1 * w[..., 0]], -1)
+        if sh_bands == 2:
+            y = np.stack([np.full((p, n), basis.Y00), -basis.C1 * w[..., 1], basis.C1 * w[..., 2],
+                          -basis.C1 * w[..., 0]], -1)
+        else:
+            y = sh_basis(w.reshape(-1, 3).astype(np.float32), sh_bands).astype(np.float64).reshape(p, n, -1)
         sh = np.einsum("pnk,pn->pk", y, weight)[..., None] * lamp.power / np.pi
     return maps.astype(np.float32), (None if sh is None else sh.astype(np.float32))
 

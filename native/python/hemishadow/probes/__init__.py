@@ -2,12 +2,14 @@
 
     from hemishadow.probes import bake_grid, volume_matrix, evaluate, write_npz
     probes = bake_grid(scene, volume_matrix(object_matrix, (4, 4, 2)), (4, 4, 2),
-                       lighting=L, suns=[Sun((0, 0, 1), 3.0)], surfaces=[...], bounces=2)
+                       lighting=L, suns=[Sun((0, 0, 1), 3.0)], lamps=[Point((0, 0, 2), 100.0)],
+                       surfaces=[...], bounces=2)
     lit = evaluate(probes, points, normals, blockers=world_triangles)["value"]
 
-One idea per module: grid (Blender's sample placement), capture (six hemispheres per probe),
-cube (sides, n-squared sampling, cube <-> SH), validity (invalid probes, moving them),
-bake, segments (segment occlusion), evaluate (interpolation without leaks), files.
+One idea per module: grid (Blender's sample placement), capture (six hemispheres per probe;
+suns and lamps), cube (sides, n-squared sampling, cube <-> SH), validity (invalid probes,
+moving them), baked (bounce light from baked lightmaps), bake, segments (segment
+occlusion), evaluate (interpolation without leaks), files.
 Units and formulas: docs/probes.md.
 """
 

@@ -4,14 +4,15 @@
 `positions` (P, 3) (after moving invalid probes), `cube` (P, 6, 3) (irradiance / pi per
 side, +X, -X, +Y, -Y, +Z, -Z), `sh9` (P, 9, 3) (SH projection of the incident radiance, the
 convention of `hemishadow.project_environment`, not divided by pi), `valid` (P,), `moved`
-(P,); `bake_grid` adds `grid_matrix` (4, 4) and `grid_resolution` (3,). See docs/probes.md.
+(P,), `lightmapped` (mesh ids whose bounce light came from their baked lightmaps); `bake_grid`
+adds `grid_matrix` (4, 4) and `grid_resolution` (3,). See docs/probes.md.
 """
 
 import numpy as np
 
 from ..lightmap.bake import Steps, bounce_receivers, direct_light, emitters, checked_lighting, positive_int, checked_suns
-from ..lightmap import bounce, cells, texels
-from . import capture, grid, validity
+from ..lightmap import bounce, cells, lamps as lamp_models, texels
+from . import baked, capture, grid, validity
 from .cube import sh_to_cube
 
 _CHUNK = 4096
@@ -39,13 +40,24 @@ def _cell(cell):
     return c
 
 
-def bake(scene, points, *, lighting=None, suns=(), surfaces=(), bounces=2, cell=None, offset=None, progress=None):
+def bake(scene, points, *, lighting=None, suns=(), lamps=(), surfaces=(), bounces=2, cell=None, offset=None,
+         lamp_points=220, lightmaps=None, progress=None):
     """Bakes probes at `points` (P, 3) in `scene` (a `hemishadow.Scene` of every blocker).
 
     lighting: environment radiance SH (K, 3), K = 1, 4, 9, 16, 25 (None: none).
     suns: `hemishadow.lightmap.Sun`s (strength = irradiance in W/m^2 facing the sun).
+    lamps: `Point`, `Spot` and `Area` lamps (`hemishadow.lightmap`; DESIGN.md's power
+        conventions), lit and shadowed as the lightmap baker does (`capture.lamp`); suns and
+        lamps with `indirect_only` light the bounce surfaces only. lamp_points: about this
+        many points on a lamp with a size (soft shadows; a Fibonacci lattice,
+        `capture.lamp_shifts`).
     surfaces: `hemishadow.lightmap.Surface`s that reflect (albedo) or emit light; bounce
         receivers at their vertices, as in the lightmap baker. bounces: 0 = direct light only.
+    lightmaps: {mesh_id: (V, 3)} the irradiance / pi at a surface's vertices from its baked
+        lightmap (its `flat` map, `baked.vertex_light`): that surface then shows
+        emission + albedo x it as its bounce radiance instead of the computed passes (which
+        are skipped when every surface has one). Bake the lightmaps with bounces - 1 bounces
+        for the same light as the computed path.
     cell: the grid's cell axes ((3, 3) columns, a number or 3 numbers), so that invalid probes
         may move up to half a cell; None: invalid probes stay, marked invalid.
     progress: callable(fraction); returning False raises `hemishadow.Cancelled`.
@@ -55,6 +67,8 @@ def bake(scene, points, *, lighting=None, suns=(), surfaces=(), bounces=2, cell=
         raise ValueError("the scene has no geometry: add the meshes that block light before baking probes")
     bounces = positive_int(bounces, "bounces", 0)
     lighting, suns, cell = checked_lighting(lighting), checked_suns(suns), _cell(cell)
+    lamps = [lamp_models.check(lamp, i) for i, lamp in enumerate(lamps)]
+    lamp_points = positive_int(lamp_points, "lamp_points")
     surfaces = list(surfaces)
     emits = emitters([], surfaces)
     receivers = bounce_receivers([], surfaces) if surfaces and (bounces or emits) else []
@@ -75,20 +89,28 @@ def bake(scene, points, *, lighting=None, suns=(), surfaces=(), bounces=2, cell=
         open_cells = np.stack([~cells.unpack(m[s:s + _CHUNK]) for m in masks])
         cube[s:s + _CHUNK], sh9[s:s + _CHUNK] = capture.environment(
             open_cells, None if lighting is None else lighting.astype(np.float64))
-    for lamp in suns:
-        c, s = capture.sun(scene, pts, lamp, offset)
+    for sun in [s for s in suns if not s.indirect_only]:
+        c, s = capture.sun(scene, pts, sun, offset)
         cube += c
         sh9 += s
+    for lamp in [lamp for lamp in lamps if not lamp.indirect_only]:
+        c, s = capture.lamp(scene, pts, lamp, lamp_points, offset)
+        cube += c
+        sh9 += s
+        steps.step(0)  # lets a cancel through between lamps
     steps.step(len(pts))
+    lightmapped = []
     if receivers:
-        gathered = _bounce(scene, receivers, pts, lighting, suns, bounces, offset, steps)
+        fixed = baked.radiance(receivers, lightmaps) if bounces else {}
+        lightmapped = sorted(fixed)
+        gathered = _bounce(scene, receivers, pts, lighting, suns, lamps, bounces, offset, steps, fixed)
         if gathered is not None:
             cube += np.maximum(sh_to_cube(gathered), 0.0)
             sh9 += gathered[:, :9]
     steps.step(len(pts))
     cube, sh9 = _fill_invalid(pts, cube, sh9, valid)
     return {"positions": pts.astype(np.float32), "cube": cube.astype(np.float32), "sh9": sh9.astype(np.float32),
-            "valid": valid, "moved": moved}
+            "valid": valid, "moved": moved, "lightmapped": lightmapped}
 
 
 def bake_grid(scene, matrix, resolution, **kwargs):
@@ -101,23 +123,38 @@ def bake_grid(scene, matrix, resolution, **kwargs):
     return out
 
 
-def _bounce(scene, receivers, points, lighting, suns, bounces, offset, steps):
+def _bounce(scene, receivers, points, lighting, suns, lamps, bounces, offset, steps, fixed):
     """SH25 (P, 25, 3) of the light arriving from the surfaces after `bounces` passes (the
     lightmap baker's vertex receivers and `bounce.vertex_radiance`), gathered over the whole
-    sphere; None when every surface stays black."""
+    sphere; surfaces in `fixed` ({mesh_id: radiance (V, 3)}, from their lightmaps) show that
+    instead. None when every surface stays black."""
+    if len(fixed) == len(receivers):
+        radiance = [fixed[r[0]] for r in receivers]
+        for (mesh_id, *_), rgb in zip(receivers, radiance):
+            scene.set_radiance(mesh_id, rgb)
+    else:
+        radiance = _computed(scene, receivers, lighting, suns, lamps, bounces, offset, steps)
+        for i, (mesh_id, *_) in enumerate(receivers):
+            if mesh_id in fixed:
+                radiance[i] = fixed[mesh_id]
+                scene.set_radiance(mesh_id, radiance[i])
+    steps.step(sum(len(r[1]) for r in receivers) * bounces)
+    if not any(r.any() for r in radiance):
+        return None
+    return scene.gather(points, None, bands=GATHER_BANDS, offset=offset).astype(np.float64)
+
+
+def _computed(scene, receivers, lighting, suns, lamps, bounces, offset, steps):
+    """Vertex radiance per surface after `bounces` passes, shown to `Scene.gather`."""
     direct = []
     for mesh_id, pts, nrm, ok, _, _ in receivers:
         d = np.zeros((len(pts), 3), np.float32)
         if ok.any() and bounces:  # with no pass, surfaces show their emission only
             d[ok] = direct_light(scene, pts[ok], nrm[ok], nrm[ok][:, None], lighting, suns,
-                                          np.zeros(ok.sum(), np.int64), texels.offsets(1), False, offset, steps,
-                                          exact_suns=False)[0][:, 0]
+                                 np.zeros(ok.sum(), np.int64), texels.offsets(1), False, offset, steps,
+                                 exact_suns=False, lamps=lamps, lamp_points=1)[0][:, 0]
         direct.append(d)
-    radiance = bounce.vertex_radiance(scene, receivers, direct, bounces, offset)
-    steps.step(sum(len(r[1]) for r in receivers) * bounces)
-    if not any(r.any() for r in radiance):
-        return None
-    return scene.gather(points, None, bands=GATHER_BANDS, offset=offset).astype(np.float64)
+    return bounce.vertex_radiance(scene, receivers, direct, bounces, offset)
 
 
 def _fill_invalid(points, cube, sh9, valid):
