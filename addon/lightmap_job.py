@@ -1,8 +1,10 @@
 """A lightmap bake in steps, for the modal Bake Lightmaps operator: Blender data is read on
 the main thread (`lightmaps.prepare`), the engine runs in a worker thread (no bpy there), and
 the timer's `step()` reports progress and, once the worker is done, writes files and images
-on the main thread. `cancel()` stops the worker at its next progress call; a cancelled bake
-writes nothing (no file, no image), even when the worker had finished.
+on the main thread. After `cancel()` the next `step()` returns CANCELLED at once, and the worker
+stops at its next progress call (the engine reports every few hundredths of a second,
+`hemishadow.lightmap.bake.Steps`); its result, if any, is dropped: a cancelled bake writes
+nothing (no file, no image), even when the worker had finished.
 """
 
 import threading
@@ -58,6 +60,9 @@ class LightmapBake:
         """RUNNING while the worker runs; then, once, writes (main thread) and returns
         FINISHED, CANCELLED (nothing written) or FAILED (`error`; nothing written)."""
         if self.state != RUNNING:
+            return self.state
+        if self._cancel.is_set():  # at once: the worker ends at its next report, writing nothing
+            self.state, self._result = CANCELLED, None
             return self.state
         self._thread.join(timeout)
         if self._thread.is_alive():

@@ -79,16 +79,40 @@ def lightmap_group():
 FRAME_NAME = "Hemishadow Lightmap"
 
 
-def baked_images(obj):
-    """The object's baked images by map name ('b0'.., 'flat'); {} when not baked."""
+MAPS = ("flat", "b0", "b1", "b2")
+
+
+def _images_named(prefix):
+    return {name: bpy.data.images[f"{prefix}_{name}"] for name in MAPS if f"{prefix}_{name}" in bpy.data.images}
+
+
+def _newest(images):
+    from .lightmaps import BAKED_KEY
+
+    return max((i.get(BAKED_KEY, 0) for i in images.values()), default=-1)
+
+
+def lightmap_of(obj, uv_name):
+    """(images by map name, the UV map reading them, the objects sharing them) of the object's
+    newest bake: its own images `hemishadow_<object>_<map>` through `uv_name`, or those of an
+    atlas holding it through `hemishadow_lightmap`; ({}, uv_name, []) when not baked."""
+    from .lightmap_atlas import ATLAS_UV, OBJECTS_KEY
     from .lightmaps import IMAGE_PREFIX
 
-    found = {}
-    for name in ("flat", "b0", "b1", "b2"):
-        image = bpy.data.images.get(f"{IMAGE_PREFIX}{obj.name}_{name}")
-        if image is not None:
-            found[name] = image
-    return found
+    best = (_images_named(f"{IMAGE_PREFIX}{obj.name}"), uv_name, [obj.name])
+    for image in bpy.data.images:
+        members = list(image.get(OBJECTS_KEY, []))
+        if obj.name in members and image.name.endswith("_flat"):
+            atlas = _images_named(image.name[:-len("_flat")])
+            if _newest(atlas) > _newest(best[0]):
+                best = (atlas, ATLAS_UV, members)
+    return best
+
+
+def baked_images(obj):
+    """The object's baked images by map name ('b0'.., 'flat'), its own or its atlas's; {} when
+    not baked."""
+    return lightmap_of(obj, None)[0]
 
 
 def _feeding(socket):
@@ -104,12 +128,13 @@ def _normal_colour(bsdf):
     return None
 
 
-def add_to_material(mat, obj, uv_name):
-    """Adds, in a frame, the object's baked maps on UV map `uv_name` combined by the group,
-    times the Base Color (its texture when one feeds it), as an Emission into a NEW Material
-    Output made active. Nothing of the material is removed or relinked: making the old
-    output active again restores it. Returns False when the frame is there already."""
-    images = baked_images(obj)
+def add_to_material(mat, obj, uv_name, images=None):
+    """Adds, in a frame, the object's baked maps (`images`, by default `baked_images`) on UV map
+    `uv_name` combined by the group, times the Base Color (its texture when one feeds it), as an
+    Emission into a NEW Material Output made active. Nothing of the material is removed or
+    relinked: making the old output active again restores it. Returns False when the frame is
+    there already."""
+    images = images or baked_images(obj)
     if not images:
         raise ValueError(f"{obj.name}: no baked lightmap images (hemishadow_{obj.name}_*): bake it first")
     if mat.node_tree is None:  # Blender before 5.0: materials without nodes
@@ -175,9 +200,10 @@ def add_to_material(mat, obj, uv_name):
 
 def add_to_objects(scene, objects, uv_name):
     """add_to_material for every material of the objects; returns (materials changed,
-    warnings). A material used by an object not baked with them (or by two baked objects,
-    which need different images) is skipped with a warning; an object without a material
-    gets a new one. Raises ValueError naming an object that was not baked (before any change)."""
+    warnings). A material used by an object that does not read the same images (one baked
+    apart, or not baked) is skipped with a warning: objects of one atlas share materials
+    freely. An object without a material gets a new one. Raises ValueError naming an object
+    that was not baked (before any change)."""
     for obj in objects:
         if not baked_images(obj):
             raise ValueError(f"{obj.name}: no baked lightmap images (hemishadow_{obj.name}_*): bake it first")
@@ -192,11 +218,12 @@ def add_to_objects(scene, objects, uv_name):
             mat = bpy.data.materials.new(f"hemishadow_lightmap_{obj.name}")
             obj.data.materials.append(mat)
             users[mat.name] = {obj.name}
+        images, uv, sharing = lightmap_of(obj, uv_name)
         for mat in {slot.material for slot in obj.material_slots if slot.material is not None}:
-            others = sorted(users.get(mat.name, set()) - {obj.name})
+            others = sorted(users.get(mat.name, set()) - set(sharing))
             if others:
                 warnings.append(f"{obj.name}: material '{mat.name}' is shared with {', '.join(others)}: left as it "
                                 "is (give the object its own copy of the material)")
-            elif add_to_material(mat, obj, uv_name):
+            elif add_to_material(mat, obj, uv, images):
                 added.append(mat.name)
     return added, warnings

@@ -22,9 +22,16 @@ class HEMISHADOW_PT_lightmaps(bpy.types.Panel):
         if settings.source == "COLLECTION":
             layout.prop(settings, "collection")
         objects = lightmap_settings.objects(context, settings)
+        layout.prop(settings, "layout")
+        atlas = settings.layout == "ATLAS" and len(objects) > 1
+        if settings.layout == "ATLAS":
+            layout.prop(settings, "atlas_name")
         layout.prop(settings, "uv_name")
         missing = [o.name for o in objects if settings.uv_name not in o.data.uv_layers]
-        if missing:
+        if missing and atlas:
+            layout.label(text=f"No '{settings.uv_name}' UV map (Lightmap Pack in the atlas): {', '.join(missing[:3])}"
+                              f"{' ...' if len(missing) > 3 else ''}", icon="INFO")
+        elif missing:
             layout.label(text=f"No '{settings.uv_name}' UV map: {', '.join(missing[:3])}"
                               f"{' ...' if len(missing) > 3 else ''}", icon="ERROR")
         layout.operator("hemishadow.make_lightmap_uv", icon="UV")

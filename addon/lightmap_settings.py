@@ -4,7 +4,7 @@ how; the Bake Lightmaps operator and `lightmaps.bake_lightmaps` take the same va
 import bpy
 from bpy.props import EnumProperty, FloatProperty, IntProperty, PointerProperty, StringProperty
 
-from . import lightmaps
+from . import lightmap_atlas, lightmaps
 
 
 class HemishadowLightmapSettings(bpy.types.PropertyGroup):
@@ -14,7 +14,14 @@ class HemishadowLightmapSettings(bpy.types.PropertyGroup):
     collection: PointerProperty(name="Collection", type=bpy.types.Collection,
                                 description="Collection whose mesh objects are baked")
     uv_name: StringProperty(name="UV Map", default=lightmaps.DEFAULT_UV,
-                            description="UV map placing the texels (never changed by the bake)")
+                            description="UV map placing the texels (never changed by the bake); in an atlas, "
+                                        "the islands packed into hemishadow_lightmap (Lightmap Pack without it)")
+    layout: EnumProperty(name="Layout", default="ATLAS", items=[
+        ("ATLAS", "Atlas", "Several objects share one image: the bake packs their islands into its own UV map "
+                           "hemishadow_lightmap (one object: its UV map as it is)"),
+        ("OBJECT", "Per Object", "One image per object, through its UV map as it is")])
+    atlas_name: StringProperty(name="Atlas Name", default=lightmap_atlas.DEFAULT_ATLAS,
+                               description="The atlas's file <name>.exr and images hemishadow_<name>_<map>")
     size_mode: EnumProperty(name="Size", default="RESOLUTION", items=[
         ("RESOLUTION", "Resolution", "The same number of texels per side for every object"),
         ("DENSITY", "Texel Density", "Texels per metre of surface: each object's size from its area")])
@@ -48,7 +55,8 @@ def bake_arguments(settings):
     density = settings.size_mode == "DENSITY"
     return dict(uv_name=settings.uv_name, resolution=settings.resolution,
                 texel_density=settings.texel_density if density else None, basis=settings.basis,
-                bounces=settings.bounces, samples=settings.samples, margin=settings.margin)
+                bounces=settings.bounces, samples=settings.samples, margin=settings.margin, layout=settings.layout,
+                atlas_name=settings.atlas_name)
 
 
 def register():

@@ -11,15 +11,17 @@ is baked. Blockers are all visible, renderable meshes of the view layer.
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import os
 import re
+import time
 import types
 import warnings
 
 import bpy
 import numpy as np
 
-from . import lamps, lightmap_albedo, world
+from . import lamps, lightmap_albedo, lightmap_atlas, world
 
 DEFAULT_UV = "lightmap"
 IMAGE_PREFIX = "hemishadow_"
@@ -244,6 +246,8 @@ def store_image(name, rgb):
 
 
 MIN_RESOLUTION, MAX_RESOLUTION = 4, 4096
+BAKED_KEY = "hemishadow_bake"  # on baked images: which bake of the session made them (the newest wins)
+_bake_counter = itertools.count(int(time.time() * 1000))
 
 
 def density_resolution(area, uv_area, texel_density):
@@ -301,6 +305,10 @@ class Prepared:
     suns: list
     resolutions: list
     options: dict
+    atlas: str | None = None  # the atlas's name when the targets share one map
+
+
+LAYOUTS = ("ATLAS", "OBJECT")
 
 
 def _check_objects(objects):
@@ -311,21 +319,56 @@ def _check_objects(objects):
             raise ValueError(f"{obj.name}: only mesh objects can have lightmaps")
 
 
+def _world_and_uv_areas(objects, depsgraph, uv_name):
+    total = np.zeros(2)
+    for obj in objects:
+        data = read_mesh(obj, depsgraph, uv_name)
+        total += surface_areas(data, np.array(obj.evaluated_get(depsgraph).matrix_world, np.float64))
+    return total
+
+
+def atlas_resolution(objects, source_uv, resolution, texel_density, margin):
+    """Lays the objects' islands out in `hemishadow_lightmap` (lightmap_atlas.layout) and
+    returns the atlas's texels per side: `resolution`, or from `texel_density` over all the
+    objects' area (laid out twice: the margin between islands depends on the resolution)."""
+    for obj in objects:
+        if not len(obj.data.polygons):
+            raise ValueError(f"{obj.name}: the mesh has no faces")
+    if texel_density is None:
+        lightmap_atlas.layout(objects, source_uv, lightmap_atlas.margin_fraction(resolution, margin))
+        return resolution
+    size = MIN_RESOLUTION
+    for guess in (0.01, None):
+        lightmap_atlas.layout(objects, source_uv, guess or lightmap_atlas.margin_fraction(size, margin))
+        area, uv_area = _world_and_uv_areas(objects, bpy.context.evaluated_depsgraph_get(), lightmap_atlas.ATLAS_UV)
+        size = density_resolution(area, uv_area, texel_density)
+    return size
+
+
 def prepare(scene, objects, *, uv_name=DEFAULT_UV, resolution=256, texel_density=None, basis="hl2", bounces=2,
-            samples=4, margin=2, depsgraph=None):
+            samples=4, margin=2, layout="ATLAS", atlas_name=None, depsgraph=None):
     """Reads the objects, blockers, materials, World and suns (warnings for shared meshes,
-    missing textures); raises ValueError naming the object for unusable input. Changes nothing."""
+    missing textures); raises ValueError naming the object for unusable input. Changes nothing,
+    except for an atlas (layout="ATLAS" and several objects): the baker's own UV map
+    `hemishadow_lightmap` is remade on their meshes (lightmap_atlas), `uv_name` giving the
+    islands."""
     import hemishadow
     import hemishadow.lightmap as lm
 
     objects = list(objects)
     _check_objects(objects)
+    if layout not in LAYOUTS:
+        raise ValueError(f"layout must be one of {LAYOUTS}, got {layout!r}")
     if texel_density is None and not (isinstance(resolution, int) and resolution >= 1):
         raise ValueError(f"resolution must be at least 1 texel, got {resolution!r}")
+    atlas = lightmap_atlas.atlas_name(atlas_name) if layout == "ATLAS" and len(objects) > 1 else None
     for name, others in shared_meshes(scene, objects).items():
         warnings.warn(f"{name}: its mesh '{scene.objects[name].data.name}' is shared with "
                       f"{', '.join(repr(o.name) for o in others)}: they have one lightmap UV layout; "
                       "Make Single User (Lightmaps) gives it a mesh of its own", RuntimeWarning, stacklevel=2)
+    if atlas is not None:
+        resolution = atlas_resolution(objects, uv_name, resolution, texel_density, margin)
+        uv_name, texel_density, depsgraph = lightmap_atlas.ATLAS_UV, None, None  # evaluated after the layout
     depsgraph = depsgraph or bpy.context.evaluated_depsgraph_get()
     engine_scene = hemishadow.Scene()
     surfaces, pairs = {}, []
@@ -350,11 +393,17 @@ def prepare(scene, objects, *, uv_name=DEFAULT_UV, resolution=256, texel_density
     targets, resolutions = [p[0] for p in pairs], [p[1] for p in pairs]
     others = [s for name, s in surfaces.items() if name not in baked]
     return Prepared(engine_scene, targets, others, lighting_of(scene), suns_of(scene), resolutions,
-                    dict(bounces=bounces, samples=samples, margin=margin, basis=basis, lamps=lamps_of(scene)))
+                    dict(bounces=bounces, samples=samples, margin=margin, basis=basis, lamps=lamps_of(scene),
+                         atlas=atlas is not None), atlas)
 
 
 def baked_names(targets):
     return [t.name for t in targets]
+
+
+def output_names(prepared):
+    """The names of the bake's files and images: the atlas's, or each object's."""
+    return [prepared.atlas] if prepared.atlas else baked_names(prepared.targets)
 
 
 def compute(prepared, progress=None):
@@ -391,7 +440,7 @@ def write_files(folder, named_maps):
 
 def finish(prepared, results, out_dir=None, images=True):
     """Writes the files (all or none) and then the Blender images; returns {object: path}."""
-    named = list(zip(baked_names(prepared.targets), results))
+    named = list(zip(output_names(prepared), results))
     folder = output_folder(out_dir)
     written = write_files(folder, named) if folder is not None else {name: None for name, _ in named}
     if images:
@@ -399,6 +448,8 @@ def finish(prepared, results, out_dir=None, images=True):
             for map_name, data in result.items():
                 if map_name != "valid":
                     image = store_image(f"{IMAGE_PREFIX}{name}_{map_name}", data)
+                    image[lightmap_atlas.OBJECTS_KEY] = baked_names(prepared.targets) if prepared.atlas else []
+                    image[BAKED_KEY] = float(next(_bake_counter))
                     if folder is None:
                         image.file_format = "OPEN_EXR"  # float pixels packed as float
                         image.pack()
@@ -406,15 +457,20 @@ def finish(prepared, results, out_dir=None, images=True):
 
 
 def bake_lightmaps(scene, objects, *, uv_name=DEFAULT_UV, resolution=256, texel_density=None, basis="hl2", bounces=2,
-                   samples=4, margin=2, out_dir=None, depsgraph=None, progress=None, images=True):
-    """Bakes the objects' lightmaps; returns {object name: EXR path or None}.
+                   samples=4, margin=2, layout="ATLAS", atlas_name=None, out_dir=None, depsgraph=None, progress=None,
+                   images=True):
+    """Bakes the objects' lightmaps; returns {object or atlas name: EXR path or None}.
 
     Writes `DIR/<object>.exr` (layers as docs/lightmaps.md) when a folder is known
     (`output_folder`) and Blender images `hemishadow_<object>_<map>` when `images`.
+    layout="ATLAS" with several objects: one map for all, `DIR/<atlas_name>.exr` and images
+    `hemishadow_<atlas_name>_<map>`, read through the UV map `hemishadow_lightmap` (made by
+    the bake from `uv_name`'s islands; lightmap_atlas); "OBJECT": `uv_name` as it is.
     `texel_density` (texels per metre) replaces `resolution` (`density_resolution`, per
     object). Raises ValueError naming the object for unusable input; `hemishadow.Cancelled`
     when `progress` returns False (nothing is written: files and images are written only once
     every map is baked). The plain path of the modal operator (lightmap_job.py)."""
     prepared = prepare(scene, objects, uv_name=uv_name, resolution=resolution, texel_density=texel_density,
-                       basis=basis, bounces=bounces, samples=samples, margin=margin, depsgraph=depsgraph)
+                       basis=basis, bounces=bounces, samples=samples, margin=margin, layout=layout,
+                       atlas_name=atlas_name, depsgraph=depsgraph)
     return finish(prepared, compute(prepared, progress), out_dir, images)

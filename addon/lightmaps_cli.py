@@ -5,7 +5,7 @@ import sys
 import time
 import warnings
 
-from . import lightmaps
+from . import lightmap_atlas, lightmaps
 
 
 def add_parser(commands):
@@ -15,8 +15,15 @@ def add_parser(commands):
                     "in the units of Cycles' Diffuse bake (irradiance / pi; docs/lightmaps.md).")
     p.add_argument("--objects", nargs="+", metavar="NAME", help="mesh objects to bake (default: the selected ones)")
     p.add_argument("--collection", metavar="NAME", help="bake the mesh objects of this collection")
-    p.add_argument("--uv", default=lightmaps.DEFAULT_UV, metavar="NAME",
-                   help=f"UV map placing the texels (default: {lightmaps.DEFAULT_UV})")
+    p.add_argument("--uv", metavar="NAME",
+                   help="UV map placing the texels, used as it is: one DIR/<object>.exr per object (default: "
+                        f"{lightmaps.DEFAULT_UV}; several objects without --uv share one atlas)")
+    p.add_argument("--per-object", action="store_true",
+                   help="one DIR/<object>.exr per object instead of the atlas (several objects)")
+    p.add_argument("--atlas", default=lightmap_atlas.DEFAULT_ATLAS, metavar="NAME",
+                   help="several objects (the default without --uv): one DIR/NAME.exr, the objects' islands "
+                        f"(from {lightmaps.DEFAULT_UV!r}, else Lightmap Pack) packed at one texel density into "
+                        f"the bake's own UV map {lightmap_atlas.ATLAS_UV!r} (default: %(default)s)")
     size = p.add_mutually_exclusive_group()
     size.add_argument("--resolution", type=int, default=256, metavar="PX", help="texels per side (default: 256)")
     size.add_argument("--texel-density", type=float, metavar="PER_M",
@@ -63,7 +70,9 @@ def run(scene, found, args, progress):
     t0 = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        written = lightmaps.bake_lightmaps(scene, found, uv_name=args.uv, resolution=args.resolution,
+        layout = "OBJECT" if args.per_object or args.uv is not None else "ATLAS"
+        written = lightmaps.bake_lightmaps(scene, found, uv_name=args.uv or lightmaps.DEFAULT_UV,
+                                           layout=layout, atlas_name=args.atlas, resolution=args.resolution,
                                            texel_density=args.texel_density, basis=args.basis, bounces=args.bounces,
                                            samples=args.samples, margin=args.margin, out_dir=args.out,
                                            progress=progress, images=False)

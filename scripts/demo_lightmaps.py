@@ -160,6 +160,7 @@ def main(argv=None):
     settings = scene.hemishadow_lightmaps
     settings.size_mode, settings.texel_density = "DENSITY", args.density
     settings.basis, settings.bounces, settings.samples = "hl2", args.bounces, 4
+    settings.layout = "OBJECT"  # an image per object, as docs/lightmaps.md shows them
     settings.directory = str(out / "lightmaps")
     assert bpy.ops.hemishadow.make_lightmap_uv(method="SMART") == {"FINISHED"}
     t0 = time.perf_counter()

@@ -8,9 +8,9 @@ caller (a script, a test) overrides its setting.
 
 import bpy
 
-from .. import lightmap_job, lightmap_nodes, lightmap_settings, lightmaps
+from .. import lightmap_atlas, lightmap_job, lightmap_nodes, lightmap_settings, lightmaps
 
-_OVERRIDABLE = ("uv_name", "resolution", "basis", "bounces", "samples", "margin")
+_OVERRIDABLE = ("uv_name", "resolution", "basis", "bounces", "samples", "margin", "layout", "atlas_name")
 
 
 def _report_warnings(operator, messages):
@@ -55,6 +55,10 @@ class HEMISHADOW_OT_bake_lightmaps(bpy.types.Operator):
     bounces: bpy.props.IntProperty(name="Bounces", default=2, min=0, max=16)
     samples: bpy.props.IntProperty(name="Samples", default=4, min=1, max=64, description="Supersamples per texel")
     margin: bpy.props.IntProperty(name="Margin", default=2, min=0, max=64, description="Padding in texels")
+    layout: bpy.props.EnumProperty(name="Layout", default="ATLAS", items=[
+        ("ATLAS", "Atlas", "Several objects share one image through the UV map hemishadow_lightmap"),
+        ("OBJECT", "Per Object", "One image per object through its UV map as it is")])
+    atlas_name: bpy.props.StringProperty(name="Atlas Name", default=lightmap_atlas.DEFAULT_ATLAS)
     directory: bpy.props.StringProperty(name="Folder", default="", subtype="DIR_PATH",
                                         description="Where <object>.exr goes (default //lightmaps beside the .blend)")
 
@@ -108,10 +112,8 @@ class HEMISHADOW_OT_bake_lightmaps(bpy.types.Operator):
     def modal(self, context, event):
         job = self._job
         if event.type == "ESC" and event.value == "PRESS":
-            job.cancel()
-            self._status(context, "Cancelling lightmap bake")
-            return {"RUNNING_MODAL"}
-        if event.type != "TIMER":
+            job.cancel()  # step() below returns CANCELLED at once; the worker stops at its next report
+        elif event.type != "TIMER":
             return {"PASS_THROUGH"}  # the UI stays usable while the worker bakes
         state = job.step()
         if state == lightmap_job.RUNNING:

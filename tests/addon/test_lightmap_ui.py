@@ -172,9 +172,12 @@ def test_panel_shows_settings_warnings_and_buttons(scene):
 
     items = draw([floor, bare])
     props = [name for kind, name in items if kind == "prop"]
-    assert props == ["source", "uv_name", "size_mode", "resolution", "basis", "bounces", "samples", "margin",
+    assert props == ["source", "layout", "atlas_name", "uv_name", "size_mode", "resolution", "basis", "bounces", "samples", "margin",
                      "directory"]
-    assert ("label", "No 'lightmap' UV map: Bare") in items
+    assert ("label", "No 'lightmap' UV map (Lightmap Pack in the atlas): Bare") in items  # two objects: an atlas
+    scene.hemishadow_lightmaps.layout = "OBJECT"
+    assert ("label", "No 'lightmap' UV map: Bare") in draw([floor, bare])
+    assert ("prop", "atlas_name") not in draw([floor, bare])
     assert ("label", "Shared meshes: Floor") in items and ("operator", "hemishadow.lightmap_single_user") in items
     for idname in ("hemishadow.make_lightmap_uv", "hemishadow.bake_lightmaps", "hemishadow.add_lightmap_nodes"):
         assert ("operator", idname) in items
@@ -289,7 +292,7 @@ def test_texel_density_sets_the_resolution_from_the_area(scene, tmp_path):
     from addon import cli
 
     assert cli.main(["lightmaps", "--objects", "Floor", "Small", "--texel-density", "8", "--bounces", "0",
-                     "--basis", "flat", "--out", str(tmp_path)]) == 0
+                     "--basis", "flat", "--per-object", "--out", str(tmp_path)]) == 0
     assert lm.read_exr(tmp_path / "Floor.exr")["flat"].shape == (44, 44, 3)  # 8 sqrt(32) = 45.3 -> 44
     assert lm.read_exr(tmp_path / "Small.exr")["flat"].shape == (8, 8, 3)
     assert cli.main(["lightmaps", "--objects", "Floor", "--texel-density", "8", "--resolution", "8",
@@ -395,9 +398,11 @@ def test_bad_input_is_refused_before_anything_is_written(scene, tmp_path):
     mesh.from_pydata([(0, 0, 0), (1, 0, 0), (0, 1, 0)], [], [])
     points = bpy.data.objects.new("Points", mesh)
     scene.collection.objects.link(points)
-    _refused(scene, [floor, points], tmp_path, "Points: no UV map named 'lightmap'")
+    _refused(scene, [floor, points], tmp_path, "Points: no UV map named 'lightmap'", layout="OBJECT")
+    _refused(scene, [floor, points], tmp_path, "Points: the mesh has no faces")  # atlas: before any UV map is made
     mesh.uv_layers.new(name="lightmap")
-    _refused(scene, [floor, points], tmp_path, "Points: the mesh has no faces")
+    _refused(scene, [floor, points], tmp_path, "Points: the mesh has no faces", layout="OBJECT")
+    _refused(scene, [floor, points], tmp_path, "layout must be one of", layout="GRID")
     _refused(scene, [plane("Bare", uv=None, location=(10, 0, 0))], tmp_path, "Bare: no UV map named 'lightmap'")
     _refused(scene, [floor], tmp_path, "resolution must be at least 1 texel, got 0", resolution=0)
     _refused(scene, [], tmp_path, "no objects to bake")

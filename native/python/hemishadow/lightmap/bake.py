@@ -9,19 +9,18 @@ centre lies in a UV triangle (before padding); `valid` (R, R), texels with a val
 before filling. See docs/lightmaps.md.
 """
 
+import time
 import warnings
 
 import numpy as np
 
 from .. import Cancelled
 from . import basis as frames
+from . import atlas as atlases
 from . import bounce, cells, dilate, geometry, lamps as lamp_models, light, seams, texels
 from .geometry import Surface, Target
 
 BASES = ("hl2", "sh", "flat")
-_CHUNK = 2048
-_LAMP_CHUNK = 8192
-_MASK_CHUNK = 8192
 
 
 def positive_int(value, what, minimum=1):
@@ -62,7 +61,11 @@ def blocked_cells(masks):
 
 class Steps:
     """Progress over `total` steps, reported to `callback` (the engine's convention: a
-    fraction; False cancels, raising Cancelled naming `what`)."""
+    fraction; False cancels, raising Cancelled naming `what`). `chunks` keeps the reports
+    (and so a cancel's latency) near `INTERVAL` seconds of CPU time apart whatever the scene
+    (CPU time: a machine busy with other work does not shrink the chunks)."""
+
+    INTERVAL = 0.05  # CPU seconds between two reports (on 2 cores, 0.025 to 0.05 s): a cancel lands within 0.2 s
 
     def __init__(self, callback, total, what="lightmap bake"):
         self.callback, self.total, self.done, self.what = callback, max(total, 1), 0, what
@@ -71,6 +74,25 @@ class Steps:
         self.done += amount
         if self.callback is not None and self.callback(min(self.done / self.total, 1.0)) is False:
             raise Cancelled(f"{self.what} cancelled")
+
+    def check(self):
+        """A report without progress: lets a cancel through."""
+        self.step(0)
+
+    def chunks(self, count, weight=1, first=1024, least=256, most=1 << 16):
+        """Slices over `count` items, each sized from the measured CPU time per item to take
+        about INTERVAL (the first `first` items, never fewer than `least`: the engine's calls
+        cost a few milliseconds each), with a report of `weight` per item after each."""
+        start, size = 0, first
+        while start < count:
+            stop = min(start + size, count)
+            t0 = time.process_time()
+            yield slice(start, stop)
+            elapsed = time.process_time() - t0
+            self.step((stop - start) * weight)
+            rate = (stop - start) / max(elapsed, 1e-6)
+            size = int(min(max(rate * self.INTERVAL, least), 2 * size, most))
+            start = stop
 
 
 def direct_light(scene, points, ng, lobes, lighting, suns, index, offsets, want_sh, offset, progress, masks=None,
@@ -86,46 +108,53 @@ def direct_light(scene, points, ng, lobes, lighting, suns, index, offsets, want_
     maps = np.zeros(lobes.shape[:2] + (3,), np.float32)
     ao = np.ones(p, np.float32)
     sh = np.zeros((p, 4, 3), np.float32) if want_sh else None
-    for start in range(0, p, _CHUNK):
-        s = slice(start, start + _CHUNK)
+    for s in progress.chunks(p):
         m, a, h = light.environment(masks[s], t[s], b[s], ng[s], lobes[s], lighting, want_sh)
         maps[s], ao[s] = m, a
         if want_sh:
             sh[s] = h
-        progress.step(min(_CHUNK, p - start))
     for sun in suns:
         dirs = light.sun_directions(sun, p, index, offsets)
         lit = np.zeros(p, np.float32)
         facing = (dirs * ng).sum(1) > 0  # below the horizon: no ray needed
+        progress.check()
         if facing.any() and texel_grid is not None:
             lit[facing] = _sun_lit(scene, points[facing], ng[facing], dirs[facing], texel_grid[0][facing],
-                                   texel_grid[1], offset)
+                                   texel_grid[1], offset, progress)
         elif facing.any():
-            lit[facing] = light.sun_visibility(scene, points[facing], ng[facing], dirs[facing], offset=offset,
-                                               exact=exact_suns)
-        m, h = light.sun_light(sun, lit, ng, lobes, dirs, want_sh)
-        maps += m
-        if want_sh:
-            sh += h
+            lit[facing] = _sun_rays(scene, points[facing], ng[facing], dirs[facing], offset, progress, exact_suns)
+        for s in progress.chunks(p, weight=0, first=4096):
+            m, h = light.sun_light(sun, lit[s], ng[s], lobes[s], dirs[s], want_sh)
+            maps[s] += m
+            if want_sh:
+                sh[s] += h
     for lamp in lamps:
-        for start in range(0, p, _LAMP_CHUNK):
-            s = slice(start, start + _LAMP_CHUNK)
+        for s in progress.chunks(p, weight=0, first=64, least=16):
             m, h = lamp_models.lamp_light(scene, lamp, points[s], ng[s], lobes[s], index[s], offsets, lamp_points,
                                           offset, want_sh)
             maps[s] += m
             if want_sh:
                 sh[s] += h
-            progress.step(0)  # lets a cancel through between chunks
     return maps, ao, sh
 
 
-def _sun_lit(scene, points, ng, dirs, texel_id, shape, offset):
+def _sun_rays(scene, points, ng, dirs, offset, progress, exact=True):
+    """`light.sun_visibility` a chunk at a time (a cancel gets through between chunks)."""
+    lit = np.empty(len(points), np.float32)
+    for s in progress.chunks(len(points), weight=0):
+        lit[s] = light.sun_visibility(scene, points[s], ng[s], dirs[s], offset=offset, exact=exact)
+    return lit
+
+
+def _sun_lit(scene, points, ng, dirs, texel_id, shape, offset, progress=None):
     """Sun visibility per sample, adaptively (as VRAD refines luxels): one ray per texel
     first; every sample of a texel gets a ray of its own only where that texel or one of its
     8 neighbours disagrees. A shadow thinner than a texel that falls between the first rays
     can be missed."""
+    progress = progress or Steps(None, 1)
     rep, of_sample = _representatives(texel_id, np.ones(len(texel_id), bool))
-    first = light.sun_visibility(scene, points[rep], ng[rep], dirs[rep], offset=offset)
+    progress.check()
+    first = _sun_rays(scene, points[rep], ng[rep], dirs[rep], offset, progress)
     grid = np.full(int(np.prod(shape)), -1, np.int8)
     grid[texel_id[rep]] = first.astype(np.int8)
     grid = grid.reshape(shape)
@@ -140,14 +169,16 @@ def _sun_lit(scene, points, ng, dirs, texel_id, shape, offset):
     redo = mixed.reshape(-1)[texel_id]
     redo[rep] = False
     if redo.any():
-        lit[redo] = light.sun_visibility(scene, points[redo], ng[redo], dirs[redo], offset=offset)
+        lit[redo] = _sun_rays(scene, points[redo], ng[redo], dirs[redo], offset, progress)
     return lit
 
 
-def _sample_geometry(target, resolution, samples):
+def _sample_geometry(target, resolution, samples, check=None):
     """Texels of a target and, per sample, world position, geometric normal, lobes' frame."""
     pos, ng, normals, tangents, uv, tris = geometry.target_corners(target)
-    tx = texels.rasterize(uv, resolution, samples)
+    check = check or (lambda: None)
+    tx = texels.rasterize(uv, resolution, samples, check)
+    check()
     if not len(tx.texel):
         warnings.warn(f"{target.label}: its lightmap UVs cover no texel of the {resolution} x {resolution} map",
                       RuntimeWarning, stacklevel=3)
@@ -156,6 +187,7 @@ def _sample_geometry(target, resolution, samples):
                       "one triangle); each texel keeps the first triangle", RuntimeWarning, stacklevel=3)
     w = tx.bary[:, :, None]
     points = (pos[tx.triangle] * w).sum(1)
+    check()
     t, b, n = frames.tangent_frames((normals[tx.triangle] * w).sum(1), (tangents[tx.triangle] * w).sum(1))
     return tx, points, ng[tx.triangle], (t, b, n), tris, uv
 
@@ -170,11 +202,16 @@ def _texel_maps(tx, resolution, values, valid):
 
 
 def bake(scene, targets, *, resolution, lighting=None, suns=(), lamps=(), surfaces=(), bounces=2, samples=4, margin=2,
-         basis="hl2", offset=None, stitch_seams=True, adaptive_suns=True, lamp_points=16, progress=None):
+         basis="hl2", offset=None, stitch_seams=True, adaptive_suns=True, lamp_points=16, atlas=False,
+         progress=None):
     """Bakes lightmaps of `targets` (`Target`s) in `scene` (a `hemishadow.Scene` holding every
-    blocker); returns one dict of maps per target (see the module docstring).
+    blocker); returns one dict of maps per target (see the module docstring), or with
+    atlas=True a list of one dict: the map all targets share (`atlas.py`).
 
-    resolution: texels per side, one int for all targets or one per target.
+    resolution: texels per side, one int for all targets or one per target (atlas: one int).
+    atlas: the targets' lightmap UVs place their islands in slots of one map (they must not
+        overlap): each is filled, padded and stitched as if baked alone, and padding never
+        crosses into another target's islands.
     lighting: environment SH (K, 3), K = 1, 4, 9, 16 or 25, radiance in the project's convention
         (`hemishadow.project_environment`, the add-on's World); None: no environment.
     suns: `Sun`s (direction towards the light, strength in W/m^2, angular diameter).
@@ -193,6 +230,8 @@ def bake(scene, targets, *, resolution, lighting=None, suns=(), lamps=(), surfac
         `hemishadow.Cancelled` and nothing is returned.
     """
     targets, sizes = _targets_and_sizes(targets, resolution)
+    if atlas and len(set(sizes)) != 1:
+        raise ValueError(f"an atlas has one resolution, got {sorted(set(sizes))}")
     samples = positive_int(samples, "samples")
     margin = positive_int(margin, "margin", 0)
     bounces = positive_int(bounces, "bounces", 0)
@@ -206,41 +245,56 @@ def bake(scene, targets, *, resolution, lighting=None, suns=(), lamps=(), surfac
     want_sh = basis == "sh"
     offs = texels.offsets(samples)
 
-    geo = [_sample_geometry(tg, r, samples) for tg, r in zip(targets, sizes)]
+    setup = Steps(progress, 1)  # before the totals are known: reports of nothing done, for a cancel
+    geo = [_sample_geometry(tg, r, samples, setup.check) for tg, r in zip(targets, sizes)]
     points = np.concatenate([g[1] for g in geo])
+    if not len(points):
+        raise ValueError(f"the lightmap UVs cover no texel of the {max(sizes)} x {max(sizes)} map: "
+                         "nothing to bake")
     ng = np.concatenate([g[2] for g in geo])
     t, b, n = (np.concatenate([g[3][k] for g in geo]) for k in range(3))
     index = np.concatenate([g[0].index for g in geo])
+    cells.moments(setup.check)  # cached: computed once per process
+    scene.prepare()  # the engine's scene build (once per scene; it cannot be interrupted)
+    setup.check()
     lobes = n[:, None] if basis != "hl2" else np.concatenate([n[:, None], frames.hl2_world(t, b, n)], axis=1)
+    setup.check()
 
     receivers = bounce_receivers(targets, surfaces) if (bounces or emitters(targets, surfaces)) else []
     vertex_count = sum(len(r[1]) for r in receivers)
-    steps = Steps(progress, len(points) + vertex_count * (1 + bounces) + len(points) * bool(receivers))
+    steps = Steps(progress, 2 * len(points) + vertex_count * (1 + bounces) + len(points) * bool(receivers))
     usable = np.linalg.norm(ng, axis=1) > 0.5  # zero-area triangles have no normal
     ng = np.where(usable[:, None], ng, n)
-    masks, valid = _masks_and_valid(scene, points, ng, offset)
+    masks, valid = _masks_and_valid(scene, points, ng, offset, steps)
     valid &= usable
     r = max(sizes)
-    texel_id = np.concatenate([(k * r + g[0].texel // sz) * r + g[0].texel % sz
-                               for k, (g, sz) in enumerate(zip(geo, sizes))])  # (target, row, col) in a T x r x r grid
-    grid = (texel_id, (len(geo), r, r)) if adaptive_suns else None
+    if atlas:  # one map: (row, col) of the shared grid
+        texel_id, layers = np.concatenate([g[0].texel for g in geo]), 1
+    else:  # (target, row, col) in a T x r x r grid
+        texel_id, layers = np.concatenate([(k * r + g[0].texel // sz) * r + g[0].texel % sz
+                                           for k, (g, sz) in enumerate(zip(geo, sizes))]), len(geo)
+    grid = (texel_id, (layers, r, r)) if adaptive_suns else None
     maps, ao, sh = direct_light(scene, points, ng, lobes, lighting, direct_suns, index, offs, want_sh, offset, steps, masks,
                            texel_grid=grid, lamps=direct_lamps, lamp_points=lamp_points)
     if receivers:
         gathered = _indirect(scene, receivers, points, ng, valid, texel_id, lighting, suns, lamps, offs, bounces,
                              offset, steps)
         if gathered is not None:
-            maps += bounce.lobe_irradiance(gathered, lobes)
-            if want_sh:
-                sh += gathered[:, :4] / np.float32(np.pi)
-        steps.step(len(points))
+            for s in steps.chunks(len(points), weight=0):
+                maps[s] += bounce.lobe_irradiance(gathered[s], lobes[s])
+                if want_sh:
+                    sh[s] += gathered[s, :4] / np.float32(np.pi)
 
     names = ["flat"] + (["b0", "b1", "b2"] if basis == "hl2" else []) + (["sh0", "sh1", "sh2", "sh3"] if want_sh else [])
     values = np.concatenate([maps.reshape(len(points), -1)] + ([sh.reshape(len(points), -1)] if want_sh else [])
                             + [ao[:, None]], axis=1)
     ends = np.cumsum([len(g[0].texel) for g in geo])
+    if atlas:
+        parts = [(tx, values[end - len(tx.texel):end], valid[end - len(tx.texel):end], tris, uv)
+                 for (tx, *_rest, tris, uv), end in zip(geo, ends)]
+        return [_finish_atlas(parts, sizes[0], names, margin, stitch_seams, steps)]
     return [_finish(tx, r, values[end - len(tx.texel):end], valid[end - len(tx.texel):end], tris, uv, names, margin,
-                    stitch_seams)
+                    stitch_seams, steps)
             for r, (tx, *_rest, tris, uv), end in zip(sizes, geo, ends)]
 
 
@@ -266,12 +320,15 @@ def _indirect(scene, receivers, points, ng, valid, texel_id, lighting, suns, lam
             d[ok] = direct_light(scene, pts[ok], nrm[ok], nrm[ok][:, None], lighting, suns, np.zeros(ok.sum(), np.int64),
                             offsets, False, offset, steps, exact_suns=False, lamps=lamps, lamp_points=1)[0][:, 0]
         direct.append(d)
-    radiance = bounce.vertex_radiance(scene, receivers, direct, bounces, offset)
-    steps.step(sum(len(r[1]) for r in receivers) * bounces)
+    radiance = bounce.vertex_radiance(scene, receivers, direct, bounces, offset, steps=steps)
     if not any(r.any() for r in radiance):
+        steps.step(len(points))
         return None
     rep, of_sample = _representatives(texel_id, valid)
-    return scene.gather(points[rep], ng[rep], bands=bounce.BANDS, offset=offset)[of_sample]
+    out = np.empty((len(rep), bounce.BANDS ** 2, 3), np.float32)
+    for s in steps.chunks(len(rep), weight=len(points) / max(len(rep), 1), least=1024):
+        out[s] = scene.gather(points[rep[s]], ng[rep[s]], bands=bounce.BANDS, offset=offset)
+    return out[of_sample]
 
 
 def hemisphere_valid(scene, points, ng, masks, offset):
@@ -285,7 +342,7 @@ def hemisphere_valid(scene, points, ng, masks, offset):
     return valid
 
 
-def _masks_and_valid(scene, points, ng, offset):
+def _masks_and_valid(scene, points, ng, offset, steps=None):
     """Raw masks (P, 16) and validity (P,) of the samples. `Scene.valid` is asked only where
     more than 45 % of a mask is blocked (it cannot fail below half), a second rasterization;
     in chunks where most samples need it (closed rooms), one `Scene.visibility_valid` call
@@ -294,8 +351,7 @@ def _masks_and_valid(scene, points, ng, offset):
     valid = np.ones(len(points), bool)
     limit = 0.45 * cells.directions().any(axis=1).sum()
     combined = False
-    for start in range(0, len(points), _MASK_CHUNK):
-        s = slice(start, start + _MASK_CHUNK)
+    for s in (steps or Steps(None, 1)).chunks(len(points)):
         if combined:
             masks[s], valid[s] = scene.visibility_valid(points[s], ng[s], offset=offset)
             maybe = blocked_cells(masks[s]) > limit
@@ -320,18 +376,40 @@ def _representatives(texel_id, valid):
     return rep, of_sample
 
 
-def _finish(tx, resolution, values, valid, tris, uv, names, margin, stitch_seams):
+def _finish(tx, resolution, values, valid, tris, uv, names, margin, stitch_seams, steps=None):
     """Texel means, invalid texels filled, padding, seams; the dict of named maps."""
+    check = steps.check if steps is not None else None
     image, known = _texel_maps(tx, resolution, values, valid)
     had_valid = known.copy()
-    dilate.fill(image, known, tx.island)
-    dilate.dilate(image, known, margin)
+    dilate.fill(image, known, tx.island, check)
+    dilate.dilate(image, known, margin, check)
     if stitch_seams:
         a, b = seams.seam_points(tris, uv, resolution)
-        seams.stitch(image, known, a, b)
+        seams.stitch(image, known, a, b, check=check)
+    return _named(image, names, tx.coverage, had_valid)
+
+
+def _finish_atlas(parts, resolution, names, margin, stitch_seams, steps):
+    """`_finish` for targets sharing one map (`atlas.compose`); `valid` and `coverage` are
+    the union of the targets'."""
+    pieces, had_valid, coverage = [], np.zeros((resolution,) * 2, bool), np.zeros((resolution,) * 2, bool)
+    for tx, values, valid, _, _ in parts:
+        image, known = _texel_maps(tx, resolution, values, valid)
+        pieces.append((image, known, tx.island))
+        had_valid |= known
+        coverage |= tx.coverage
+        steps.step(0)
+    image, known, _ = atlases.compose(pieces, resolution, pieces[0][0].shape[2], margin, steps.check)
+    if stitch_seams:
+        for _, _, _, tris, uv in parts:
+            seams.stitch(image, known, *seams.seam_points(tris, uv, resolution), check=steps.check)
+    return _named(image, names, coverage, had_valid)
+
+
+def _named(image, names, coverage, had_valid):
     out = {name: np.ascontiguousarray(image[..., 3 * i:3 * i + 3]) for i, name in enumerate(names)}
     out["ao"] = np.ascontiguousarray(image[..., -1])
-    out["coverage"] = tx.coverage.astype(np.float32)
+    out["coverage"] = coverage.astype(np.float32)
     out["valid"] = had_valid
     return out
 

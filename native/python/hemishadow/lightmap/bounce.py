@@ -23,8 +23,10 @@ def lobe_irradiance(gathered, lobes):
     return np.maximum(np.einsum("plk,pkc->plc", y, gathered) / np.float32(np.pi), 0.0).astype(np.float32)
 
 
-def vertex_radiance(scene, receivers, direct, bounces, offset=None, progress=None):
+def vertex_radiance(scene, receivers, direct, bounces, offset=None, progress=None, steps=None):
     """Sets each surface's vertex radiance after `bounces` passes and returns it.
+    steps: a `bake.Steps` given a step per vertex and pass, in chunks short enough for a
+    cancel to get through (else `progress` goes to the engine's gather).
 
     receivers: per surface (mesh_id, points (V, 3), normals (V, 3), usable (V,) bool, albedo
     (V, 3), emission (V, 3)); direct: per surface, the direct irradiance / pi (V, 3) at its
@@ -38,12 +40,23 @@ def vertex_radiance(scene, receivers, direct, bounces, offset=None, progress=Non
         for (mesh_id, points, normals, usable, albedo, emission), d in zip(receivers, direct):
             light = d.copy()
             if shown and usable.any():
-                g = scene.gather(points[usable], normals[usable], bands=BANDS, offset=offset, progress=progress)
-                light[usable] += lobe_irradiance(g, normals[usable][:, None])[:, 0]
+                light[usable] += _gathered(scene, points[usable], normals[usable], offset, progress, steps)
             new.append((emission + albedo * light).astype(np.float32))
         radiance = new
     _show(scene, receivers, radiance)
     return radiance
+
+
+def _gathered(scene, points, normals, offset, progress, steps):
+    """Irradiance / pi (V, 3) gathered at vertices along their normals."""
+    if steps is None:
+        g = scene.gather(points, normals, bands=BANDS, offset=offset, progress=progress)
+        return lobe_irradiance(g, normals[:, None])[:, 0]
+    out = np.empty((len(points), 3), np.float32)
+    for s in steps.chunks(len(points), least=1024):
+        g = scene.gather(points[s], normals[s], bands=BANDS, offset=offset)
+        out[s] = lobe_irradiance(g, normals[s][:, None])[:, 0]
+    return out
 
 
 def _show(scene, receivers, radiance):

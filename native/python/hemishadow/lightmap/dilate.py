@@ -30,21 +30,29 @@ def grow(values, known, region=None):
     return int(new.sum())
 
 
-def fill(values, known, region):
+def _checked(check):
+    if check is not None:
+        check()
+    return True
+
+
+def fill(values, known, region, check=None):
     """Fills every texel of `region` from the known ones: first through the region itself,
-    then (an island with no valid texel at all) from whatever is nearest. In place."""
-    while (region & ~known).any() and grow(values, known, region):
+    then (an island with no valid texel at all) from whatever is nearest. In place. `check`:
+    called before each pass (a cancel raises there)."""
+    while _checked(check) and (region & ~known).any() and grow(values, known, region):
         pass
     if (region & ~known).any() and known.any():
         scratch, reach = values.copy(), known.copy()
-        while (region & ~reach).any() and grow(scratch, reach):
+        while _checked(check) and (region & ~reach).any() and grow(scratch, reach):
             pass
         rest = region & ~known
         values[rest], known[rest] = scratch[rest], True
 
 
-def dilate(values, known, margin):
+def dilate(values, known, margin, check=None):
     """Pads `margin` texels around the known ones. In place."""
     for _ in range(int(margin)):
+        _checked(check)
         if not grow(values, known):
             break

@@ -58,10 +58,11 @@ def lookup(values, points):
     return (flat[idx] * w[..., None]).sum(axis=1)
 
 
-def stitch(values, known, a, b, iterations=200, tolerance=1e-6):
+def stitch(values, known, a, b, iterations=200, tolerance=1e-6, check=None):
     """Makes the bilinear lookups at `a` and `b` agree with the least change to the known
     texels (x = x0 - A^T (A A^T)^-1 A x0, A the lookup differences; conjugate gradients on
-    A A^T). Unknown texels stay as they are. In place."""
+    A A^T). Unknown texels stay as they are. In place. `check`:
+    called each iteration (a cancel raises there)."""
     if not len(a):
         return
     r = values.shape[0]
@@ -86,6 +87,8 @@ def stitch(values, known, a, b, iterations=200, tolerance=1e-6):
     direction = res.copy()
     rho = (res * res).sum(axis=0)
     for _ in range(iterations):
+        if check is not None:
+            check()
         if np.sqrt(rho.max()) <= tolerance * scale:
             break
         q = apply(spread(direction)) + 1e-9 * direction
