@@ -52,7 +52,14 @@ def _parser() -> argparse.ArgumentParser:
                    help="the file's up axis; auto = y for OBJ and glTF, z otherwise. "
                         "Lighting is computed in Blender's +Z-up world; written vertices "
                         "stay as in the input file")
+    _add_farm(sub)
     return parser
+
+
+def _add_farm(sub):
+    """`farm` (hemishadow.farm.command): listed here, parsed there, as its other options go to the workers."""
+    sub.add_parser("farm", add_help=False, help="run a bake, lightmaps or probes on a Dask cluster "
+                                                "(python -m hemishadow farm --help; docs/farm.md)")
 
 
 def _output_paths(mesh_path: str, out: str | None) -> tuple[str, str]:
@@ -183,6 +190,11 @@ def _cancelled() -> int:
 
 
 def main(argv=None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv[:1] == ["farm"]:
+        from .farm.command import main as farm
+
+        return farm(argv[1:])
     args = _parser().parse_args(argv)
     try:
         if args.command == "transfer":
