@@ -97,8 +97,8 @@ class Job:
         done = 0
         for future in as_completed(self.futures):
             if future.status == "error":
-                self.cancel()
                 error = future.exception()
+                self.cancel()
                 raise FarmError(str(error) if isinstance(error, FarmError) else
                                 f"{units.describe(work[order[future.key]])}: {type(error).__name__}: {error}")
             result = future.result()

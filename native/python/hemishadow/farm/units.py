@@ -2,12 +2,14 @@
 a retry after a lost worker is safe. A unit is a plain dict (see worker.py).
 
 Sizes: per-unit overhead (opening the .blend, registering the add-on, reading the scene into
-the engine) must stay under 10 % of the unit's work. bench/farm.py measures both; on the
-bench scenes opening costs about OPEN_SECONDS and a frame of a few thousand vertices about as
-much again, so a bake unit takes at least MIN_FRAMES frames. Probe units repeat the scene's
-bounce pass (every unit needs the whole scene's bounce light), so blocks are large. Lightmaps
-are one unit per object: its padding and seam pass need all of its own texels and no other
-object's. `--frames-per-unit` / `--probes-per-unit` override the sizes.
+the engine) must stay under 10 % of the unit's work. bench/farm.py measures both (docs/farm.md
+has the numbers): a bake unit takes at least MIN_FRAMES frames. Probe units repeat the scene's
+bounce pass (every unit needs the whole scene's bounce light), so blocks are large, and whole
+multiples of the probe baker's chunk of PROBE_CHUNK probes: its float32 matrix products then
+see the same shapes as on one machine and give the same bits (smaller blocks, with
+`--probes-per-unit`, differ in the last bits of sh9). Lightmaps are one unit per object: its
+padding and seam pass need all of its own texels and no other object's.
+`--frames-per-unit` / `--probes-per-unit` override the sizes.
 """
 
 from __future__ import annotations
@@ -17,7 +19,7 @@ import json
 import math
 
 MIN_FRAMES = 10        # bake: frames per unit at least (bench/farm.py: overhead < 10 % of the work)
-MIN_PROBES = 512       # probes: probes per unit at least
+from hemishadow.probes.bake import _CHUNK as PROBE_CHUNK   # blocks of whole chunks give the same bits
 UNITS_PER_WORKER = 3   # enough units for balance when units take unequal times
 
 
@@ -50,7 +52,7 @@ def make(plan, unit_base, workers, frames_per_unit=None, probes_per_unit=None):
         return [dict(unit_base, object=name) for name in plan["objects"]]
     if kind == "probes":
         count = plan["count"]
-        size = _size(count, workers, MIN_PROBES, probes_per_unit)
+        size = probes_per_unit or PROBE_CHUNK * math.ceil(_size(count, workers, PROBE_CHUNK, None) / PROBE_CHUNK)
         return [dict(unit_base, block=[s, min(count, s + size)]) for s in range(0, count, size)]
     raise ValueError(f"unknown kind of job {kind!r}")
 

@@ -48,14 +48,14 @@ def addon_package(addon_dir):
     """The add-on's package, registered once per process: from `addon_dir` (a folder with
     `addon/`) or, with None, the one an enabled extension registered."""
     global _package
+    if addon_dir and not os.path.isfile(os.path.join(addon_dir, "addon", "__init__.py")):
+        raise FarmError(f"{_where()}: the hemishadow add-on is not in {addon_dir} (no addon/__init__.py): "
+                        "give --addon a checkout the workers can read, or install the extension on them")
     if _package is not None:
         return _package
-    import bpy
+    bpy = _import_bpy()
 
     if addon_dir:
-        if not os.path.isfile(os.path.join(addon_dir, "addon", "__init__.py")):
-            raise FarmError(f"{_where()}: the hemishadow add-on is not in {addon_dir} (no addon/__init__.py): "
-                            "give --addon a checkout the workers can read, or install the extension on them")
         if addon_dir not in sys.path:
             sys.path.insert(0, addon_dir)
         package = importlib.import_module("addon")
@@ -69,6 +69,19 @@ def addon_package(addon_dir):
                             "extension on the workers or give --addon a checkout they can read")
     _package = package
     return package
+
+
+def _import_bpy():
+    """bpy, also in a process spawned by one that had imported it: the spawned process inherits
+    its sys.path, where Blender's own `scripts/modules` (holding the inner `bpy` package) shadows
+    the bpy module until the module itself is imported."""
+    if "bpy" not in sys.modules:
+        sys.path[:] = [p for p in sys.path if not (os.path.basename(p) == "modules"
+                                                   and os.path.basename(os.path.dirname(p)) == "scripts"
+                                                   and os.path.isdir(os.path.join(p, "bpy")))]
+    import bpy
+
+    return bpy
 
 
 def module(name):
