@@ -4,10 +4,10 @@ Registration only. The engine (`hemishadow`, shipped as a wheel inside the exten
 imported lazily by the modules that compute, so registering never loads it.
 """
 
-from . import cli, handlers, lightmap_panel, lightmap_settings, operators, panels, probe_panel, properties
+from . import cli, farm_panel, handlers, lightmap_panel, lightmap_settings, operators, panels, probe_panel, properties
 
 # Properties first: operators and panels refer to them; handlers last, once all is in place.
-_modules = (properties, lightmap_settings, operators, panels, lightmap_panel, probe_panel, cli, handlers)
+_modules = (properties, lightmap_settings, operators, panels, farm_panel, lightmap_panel, probe_panel, cli, handlers)
 
 
 def register():

@@ -93,7 +93,7 @@ def assert_same_caches(a_dir, b_dir, names=("Sheet", "Ball")):
 
 
 def test_units_cover_the_job_once_and_are_deterministic():
-    plan = dict(kind="bake", objects=["A", "B"], frames=[3, 25], simulated=[])
+    plan = dict(kind="bake", objects=["A", "B"], frames=[3, 25], simulated=[], vertices=dict(A=100, B=10 ** 6))
     base = units.base("bake", "/x.blend", [], None)
     made = units.make(plan, base, workers=2, frames_per_unit=4)
     for name in "AB":
@@ -104,6 +104,10 @@ def test_units_cover_the_job_once_and_are_deterministic():
     # a simulation is baked in order: one unit per object over the whole range
     simulated = units.make(dict(plan, simulated=["Cloth"]), base, workers=2, frames_per_unit=4)
     assert [u["frames"] for u in simulated] == [[3, 25], [3, 25]]
+    # default sizes: a small mesh's overhead needs long units, a heavy one's only balance
+    auto = units.make(plan, base, workers=2)
+    assert [u["frames"] for u in auto if u["object"] == "A"] == [[3, 25]]
+    assert len([u for u in auto if u["object"] == "B"]) == 6   # 3 per worker
     # probe blocks: whole chunks of the probe baker by default, covering every probe once
     blocks = units.make(dict(kind="probes", count=3 * units.PROBE_CHUNK + 5), base, workers=2)
     assert [b["block"][0] for b in blocks] == [k * units.PROBE_CHUNK for k in range(4)] and blocks[-1]["block"][1] == 3 * units.PROBE_CHUNK + 5

@@ -2,13 +2,16 @@
 a retry after a lost worker is safe. A unit is a plain dict (see worker.py).
 
 Sizes: per-unit overhead (opening the .blend, registering the add-on, reading the scene into
-the engine) must stay under 10 % of the unit's work. bench/farm.py measures both (docs/farm.md
-has the numbers): a bake unit takes at least MIN_FRAMES frames. Probe units repeat the scene's
-bounce pass (every unit needs the whole scene's bounce light), so blocks are large, and whole
-multiples of the probe baker's chunk of PROBE_CHUNK probes: its float32 matrix products then
-see the same shapes as on one machine and give the same bits (smaller blocks, with
-`--probes-per-unit`, differ in the last bits of sh9). Lightmaps are one unit per object: its
-padding and seam pass need all of its own texels and no other object's.
+the engine, building the object's solver) must stay under 10 % of the unit's work. bench/farm.py
+measures both by regression over unit sizes: a bake unit costs UNIT_SECONDS plus about
+FRAME_SECONDS_PER_VERTEX x vertices per frame (one engine thread), so an object of V vertices
+gets units of at least UNIT_SECONDS / (0.1 x FRAME_SECONDS_PER_VERTEX x V) frames (a 2k-vertex
+mesh: tens of frames; a 50k-vertex character: a few), and at most enough units for balance.
+Probe units repeat the scene's bounce pass (every unit needs the whole scene's bounce light),
+so blocks are large, and whole multiples of the probe baker's chunk of PROBE_CHUNK probes: its
+float32 matrix products then see the same shapes as on one machine and give the same bits
+(smaller blocks, with `--probes-per-unit`, differ in the last bits). Lightmaps are one unit per
+object: its padding and seam pass need all of its own texels and no other object's.
 `--frames-per-unit` / `--probes-per-unit` override the sizes.
 """
 
@@ -18,7 +21,9 @@ import hashlib
 import json
 import math
 
-MIN_FRAMES = 10        # bake: frames per unit at least (bench/farm.py: overhead < 10 % of the work)
+UNIT_SECONDS = 0.25               # bench/farm.py: fixed cost of a bake unit (open, setup, solver)
+FRAME_SECONDS_PER_VERTEX = 4e-5   # bench/farm.py: one object-frame per vertex, one engine thread
+OVERHEAD = 0.1                    # the most per-unit overhead allowed, as a fraction of the work
 from hemishadow.probes.bake import _CHUNK as PROBE_CHUNK   # blocks of whole chunks give the same bits
 UNITS_PER_WORKER = 3   # enough units for balance when units take unequal times
 
@@ -33,10 +38,18 @@ def plan_unit(kind, blend, args, addon):
     return unit
 
 
+def min_frames(vertices):
+    """Frames a bake unit of an object of `vertices` vertices needs for overhead < OVERHEAD."""
+    return max(1, math.ceil(UNIT_SECONDS / (OVERHEAD * FRAME_SECONDS_PER_VERTEX * max(vertices, 1))))
+
+
 def _size(count, workers, minimum, given):
+    """Items per unit: `given`, else equal units of at least `minimum` items, at most
+    UNITS_PER_WORKER per worker (balance when units take unequal times)."""
     if given:
         return max(1, int(given))
-    return max(minimum, math.ceil(count / max(1, UNITS_PER_WORKER * workers)))
+    n = min(max(1, count // max(1, minimum)), max(1, UNITS_PER_WORKER * workers))
+    return math.ceil(count / n)
 
 
 def make(plan, unit_base, workers, frames_per_unit=None, probes_per_unit=None):
@@ -45,14 +58,19 @@ def make(plan, unit_base, workers, frames_per_unit=None, probes_per_unit=None):
     if kind == "bake":
         a, b = plan["frames"]
         count = b - a + 1
-        size = count if plan["simulated"] else _size(count, workers, MIN_FRAMES, frames_per_unit)
-        return [dict(unit_base, object=name, frames=[s, min(b, s + size - 1)], start=a)
-                for name in plan["objects"] for s in range(a, b + 1, size)]
+        out = []
+        for name in plan["objects"]:
+            size = count if plan["simulated"] else _size(count, workers, min_frames(plan["vertices"][name]),
+                                                         frames_per_unit)
+            out += [dict(unit_base, object=name, frames=[s, min(b, s + size - 1)], start=a)
+                    for s in range(a, b + 1, size)]
+        return out
     if kind == "lightmaps":
         return [dict(unit_base, object=name) for name in plan["objects"]]
     if kind == "probes":
         count = plan["count"]
-        size = probes_per_unit or PROBE_CHUNK * math.ceil(_size(count, workers, PROBE_CHUNK, None) / PROBE_CHUNK)
+        chunks = math.ceil(count / PROBE_CHUNK)
+        size = probes_per_unit or PROBE_CHUNK * _size(chunks, workers, 1, None)
         return [dict(unit_base, block=[s, min(count, s + size)]) for s in range(0, count, size)]
     raise ValueError(f"unknown kind of job {kind!r}")
 

@@ -157,7 +157,9 @@ def _plan(unit):
         if end < start:
             raise FarmError(f"hemishadow farm: error: --end {end} is before --start {start}")
         cache = module("cache")
+        depsgraph = bpy.context.evaluated_depsgraph_get()
         plan.update(objects=[o.name for o in objects], frames=[start, end], simulated=_simulated(scene),
+                    vertices={o.name: len(o.evaluated_get(depsgraph).data.vertices) for o in objects},
                     outputs={o.name: cache.cache_path(o, args.cache_dir) for o in objects},
                     pack=args.pack, save=args.save, cache_dir=args.cache_dir)
     elif kind == "lightmaps":
