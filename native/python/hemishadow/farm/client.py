@@ -49,12 +49,12 @@ class Job:
     """One farm job. `task`: worker.run (bpy in the worker) or worker.run_subprocess."""
 
     def __init__(self, kind, blend, args, *, addon=None, worker_mode="bpy", blender="blender", send_blend=False,
-                 frames_per_unit=None, probes_per_unit=None, out=sys.stderr):
+                 frames_per_unit=None, probes_per_unit=None, cameras=None, out=sys.stderr):
         from . import worker
 
         self.kind, self.args, self.addon = kind, list(args), addon
         self.blend = os.path.abspath(blend)
-        self.send_blend = send_blend
+        self.send_blend, self.cameras = send_blend, cameras
         self.sizes = dict(frames_per_unit=frames_per_unit, probes_per_unit=probes_per_unit)
         if worker_mode == "bpy":
             self.task, self.task_kwargs = worker.run, {}
@@ -75,7 +75,8 @@ class Job:
             with open(self.blend, "rb") as handle:
                 blend_data = client.scatter(handle.read(), broadcast=True)
         unit_base = units.base(self.kind, self.blend, self.args, self.addon)
-        plan = self._submit([units.plan_unit(self.kind, self.blend, self.args, self.addon)], blend_data, "plan")
+        plan = self._submit([units.plan_unit(self.kind, self.blend, self.args, self.addon, self.cameras)],
+                            blend_data, "plan")
         plan = plan[0]["plan"]
         merge.check_writable(self._outputs(plan))
         workers = max(1, len(client.scheduler_info().get("workers", {})))
@@ -135,6 +136,8 @@ class Job:
         if self.kind == "lightmaps":
             folder = merge.resolve(plan["folder"], self.blend)
             return [os.path.join(folder, f"{merge._safe(n)}.exr") for n in plan["objects"]]
+        if self.kind == "panorama":
+            return [merge.resolve(path, self.blend) for _, path in plan["outputs"]]
         return [merge.resolve(plan["output"], self.blend)]
 
     def _merge(self, plan):
@@ -155,6 +158,11 @@ class Job:
             written = merge.write_lightmaps(plan, self.results, self.blend)
             for name, path in written.items():
                 print(f"hemishadow: {name} -> {path}")
+            return written
+        if self.kind == "panorama":
+            written = merge.write_panoramas(plan, self.results, self.blend)
+            for name, path in written.items():
+                print(f"hemishadow: panorama {name or ''} -> {path}".replace("  ", " "))
             return written
         result = merge.probe_result(plan, self.results)
         path = merge.write_probes(plan, result, self.blend)

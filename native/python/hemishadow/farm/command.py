@@ -1,4 +1,4 @@
-"""`python -m hemishadow farm bake|lightmaps|probes FILE.blend --scheduler ADDRESS | --local N
+"""`python -m hemishadow farm bake|lightmaps|probes|panorama FILE.blend --scheduler ADDRESS | --local N
 [the subcommand's own options]`: the farm options are parsed here; every other option goes to
 the workers, which parse it with the add-on's own parser (`blender -b FILE --command hemishadow
 SUBCOMMAND --help` lists them), so the farm takes exactly the headless commands' options.
@@ -12,7 +12,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-KINDS = ("bake", "lightmaps", "probes")
+KINDS = ("bake", "lightmaps", "probes", "panorama")
 
 
 def parser():
@@ -23,7 +23,7 @@ def parser():
         epilog="Other options are the subcommand's own (see `blender -b FILE --command hemishadow SUBCOMMAND "
                "--help`), e.g.\n  python -m hemishadow farm bake shot.blend --local 2 --start 1 --end 240\n"
                "  python -m hemishadow farm lightmaps level.blend --scheduler tls://farm:8786 --objects Room")
-    p.add_argument("what", choices=KINDS, metavar="{bake,lightmaps,probes}", help="the headless subcommand to run")
+    p.add_argument("what", choices=KINDS, metavar="{bake,lightmaps,probes,panorama}", help="the headless subcommand to run")
     p.add_argument("blend", metavar="FILE.blend", help="the saved .blend, as the workers see it (shared path) "
                                                        "unless --send-blend")
     where = p.add_mutually_exclusive_group()
@@ -42,6 +42,8 @@ def parser():
                    help="send the .blend's bytes through the scheduler (no shared path; pack its images first)")
     p.add_argument("--frames-per-unit", type=int, metavar="N", help="bake: frames per work unit (default: auto)")
     p.add_argument("--probes-per-unit", type=int, metavar="N", help="probes: probes per work unit (default: auto)")
+    p.add_argument("--cameras", nargs="+", metavar="NAME",
+                   help="panorama: one panorama per camera (or Empty), each to //panoramas/<camera>.exr")
     p.add_argument("--timeout", type=float, default=10.0, metavar="S",
                    help="seconds to wait for the scheduler (default: 10)")
     return p
@@ -63,7 +65,7 @@ def main(argv) -> int:
     try:
         job = client.Job(args.what, args.blend, rest, addon=addon, worker_mode=args.worker_mode,
                          blender=args.blender, send_blend=args.send_blend, frames_per_unit=args.frames_per_unit,
-                         probes_per_unit=args.probes_per_unit)
+                         probes_per_unit=args.probes_per_unit, cameras=args.cameras)
         client.run_job(job, args.scheduler, args.local, args.timeout)
     except KeyboardInterrupt:
         print("hemishadow farm: cancelled (Ctrl-C): queued units removed, nothing written", file=sys.stderr)

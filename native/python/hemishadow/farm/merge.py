@@ -171,3 +171,27 @@ def write_probes(plan, result, blend):
     json_path = os.path.splitext(path)[0] + ".json"
     write_all([(path, lambda p: hp.write_npz(p, result)), (json_path, lambda p: hp.write_json(p, result))])
     return path
+
+
+# ---------------------------------------------------------------------------------------
+# Panoramas
+
+def write_panoramas(plan, results, blend):
+    """Each panorama's FILE.exr and its compact form FILE/... (the unit's files, named relative
+    to its private `panorama.exr`), every file of every panorama or none."""
+    where = {name: resolve(path, blend) for name, path in plan["outputs"]}
+    files, written = [], {}
+    for result in results:
+        final = where[result["camera"]]
+        stem = os.path.splitext(final)[0]
+        for rel, data in sorted(result["files"].items()):
+            if rel == "panorama.exr":
+                target = final
+            elif rel.split(os.sep)[0] == "panorama":
+                target = os.path.join(stem, *rel.split(os.sep)[1:])
+            else:
+                raise MergeError(f"panorama {result['camera']}: unexpected file {rel} from the unit")
+            files.append((target, lambda path, data=data: _write_bytes(path, data)))
+        written[result["camera"]] = final
+    write_all(files)
+    return written

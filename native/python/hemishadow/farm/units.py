@@ -11,7 +11,8 @@ Probe units repeat the scene's bounce pass (every unit needs the whole scene's b
 so blocks are large, and whole multiples of the probe baker's chunk of PROBE_CHUNK probes: its
 float32 matrix products then see the same shapes as on one machine and give the same bits
 (smaller blocks, with `--probes-per-unit`, differ in the last bits). Lightmaps are one unit per
-object: its padding and seam pass need all of its own texels and no other object's.
+object: its padding and seam pass need all of its own texels and no other object's. A panorama
+is one unit (`--cameras` makes one per camera).
 `--frames-per-unit` / `--probes-per-unit` override the sizes.
 """
 
@@ -21,8 +22,8 @@ import hashlib
 import json
 import math
 
-UNIT_SECONDS = 0.25               # bench/farm.py: fixed cost of a bake unit (open, setup, solver)
-FRAME_SECONDS_PER_VERTEX = 4e-5   # bench/farm.py: one object-frame per vertex, one engine thread
+UNIT_SECONDS = 0.2                # bench/farm.py: fixed cost of a bake unit (open, setup, solver)
+FRAME_SECONDS_PER_VERTEX = 3.4e-5 # bench/farm.py: one object-frame per vertex, one engine thread
 OVERHEAD = 0.1                    # the most per-unit overhead allowed, as a fraction of the work
 from hemishadow.probes.bake import _CHUNK as PROBE_CHUNK   # blocks of whole chunks give the same bits
 UNITS_PER_WORKER = 3   # enough units for balance when units take unequal times
@@ -32,10 +33,9 @@ def base(kind, blend, args, addon):
     return dict(kind=kind, blend=blend, args=list(args), addon=addon)
 
 
-def plan_unit(kind, blend, args, addon):
+def plan_unit(kind, blend, args, addon, cameras=None):
     """The first task: reads the .blend on a worker and says what the units are."""
-    unit = base("plan", blend, [kind, *args], addon)
-    return unit
+    return dict(base("plan", blend, [kind, *args], addon), cameras=cameras)
 
 
 def min_frames(vertices):
@@ -72,6 +72,8 @@ def make(plan, unit_base, workers, frames_per_unit=None, probes_per_unit=None):
         chunks = math.ceil(count / PROBE_CHUNK)
         size = probes_per_unit or PROBE_CHUNK * _size(chunks, workers, 1, None)
         return [dict(unit_base, block=[s, min(count, s + size)]) for s in range(0, count, size)]
+    if kind == "panorama":   # one panorama per unit: its pixels share one scene and one bounce pass
+        return [dict(unit_base, camera=name) for name in plan["cameras"]]
     raise ValueError(f"unknown kind of job {kind!r}")
 
 
@@ -88,4 +90,6 @@ def describe(unit) -> str:
         return f"{unit['object']} frames {unit['frames'][0]}..{unit['frames'][1]}"
     if unit["kind"] == "probes":
         return f"probes {unit['block'][0]}..{unit['block'][1] - 1}"
+    if unit["kind"] == "panorama":
+        return f"panorama {unit['camera'] or '(the command line viewpoint)'}"
     return unit.get("object", unit["kind"])

@@ -1,13 +1,14 @@
 """What runs on a farm worker: open the .blend, register the add-on, run one work unit.
 
 A unit is a plain dict (JSON-able: it also goes to a `blender -b` subprocess as a file):
-  kind    "plan", "bake", "lightmaps" or "probes"
+  kind    "plan", "bake", "lightmaps", "probes" or "panorama"
   blend   path of the .blend as the workers see it (or its name, when the bytes are sent)
   args    the subcommand's own options, parsed here by the add-on's own parser (addon/cli.py),
           so the farm takes exactly the options of `blender -b FILE --command hemishadow ...`
   addon   folder holding the add-on package `addon/` (a source checkout), or None: the add-on
           must then be installed and enabled in the worker's Blender (the extension)
-  plus    bake: object, frames [a, b]; lightmaps: object; probes: block [a, b] (probe indices)
+  plus    bake: object, frames [a, b], start (the whole bake's); lightmaps: object; probes: block
+          [a, b] (probe indices); panorama: camera (None: the command's own viewpoint)
 
 Results are dicts of numpy arrays and numbers (`seconds`: open = opening the .blend and
 registering, setup = reading the scene into the engine, work = the unit's own computation).
@@ -173,7 +174,33 @@ def _plan(unit):
         count = len(points) if volume is None else int(np.prod(probes.grid_of(volume, args.resolution)[1]))
         name = volume.name if volume else "points"
         plan.update(count=count, output=args.out or f"//probes/{module('lightmaps')._safe(name)}.npz")
+    elif kind == "panorama":
+        plan.update(_panorama_plan(scene, args, unit.get("cameras")))
     return dict(plan=plan, seconds=dict(setup=time.perf_counter() - t0, work=0.0))
+
+
+def _panorama_modules():
+    try:
+        return module("panorama_bake"), module("panorama_cli")
+    except ImportError:
+        raise FarmError(f"{_where()}: this hemishadow add-on has no panorama baker (addon/panorama_cli.py)") from None
+
+
+def _panorama_plan(scene, args, cameras):
+    """One panorama per camera (`--cameras`, else the command's own --camera / --at / the scene
+    camera); where each goes, `//`-relative to the .blend as the headless command names it."""
+    import bpy
+
+    bake, _ = _panorama_modules()
+    cameras = list(cameras or [args.camera])
+    if len(cameras) > 1 and (args.out or args.at):
+        raise FarmError("hemishadow farm: error: --cameras bakes one panorama per camera to "
+                        "//panoramas/<camera>.exr: leave out --out and --at")
+    for name in cameras:
+        if name is not None and scene.objects.get(name) is None:
+            raise FarmError(f"hemishadow farm: error: no camera or Empty named {name!r} in scene {scene.name!r}")
+    outputs = [[name, args.out or bpy.path.relpath(bake.output_path(name, None))] for name in cameras]
+    return dict(cameras=cameras, outputs=outputs)
 
 
 def _simulated(scene):
@@ -297,7 +324,31 @@ def _probes(unit):
                 seconds=dict(setup=setup, work=time.perf_counter() - t1))
 
 
-_KINDS = {"plan": _plan, "bake": _bake, "lightmaps": _lightmaps, "probes": _probes}
+def _panorama(unit):
+    """One panorama through the headless command's own run (its checks, its files), written to
+    a private folder; the files come back as bytes, named relative to FILE.exr's stem."""
+    _, command = _panorama_modules()
+    cli = module("cli")
+    t0 = time.perf_counter()
+    args = _parse("panorama", unit["args"])
+    if unit.get("camera") is not None:
+        args.camera = unit["camera"]
+    scene = cli._scene(args.scene)
+    setup = time.perf_counter() - t0
+    with tempfile.TemporaryDirectory(prefix="hemishadow-unit-") as folder:
+        t1 = time.perf_counter()
+        args.out = os.path.join(folder, "panorama.exr")
+        command.run(scene, args, lambda m: FarmError(f"hemishadow farm: error: {m}"), None)
+        files = {}
+        for root, _, names in os.walk(folder):
+            for name in names:
+                path = os.path.join(root, name)
+                with open(path, "rb") as handle:
+                    files[os.path.relpath(path, folder)] = handle.read()
+    return dict(camera=unit.get("camera"), files=files, seconds=dict(setup=setup, work=time.perf_counter() - t1))
+
+
+_KINDS = {"plan": _plan, "bake": _bake, "lightmaps": _lightmaps, "probes": _probes, "panorama": _panorama}
 
 
 # ---------------------------------------------------------------------------------------
