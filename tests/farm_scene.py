@@ -1,6 +1,7 @@
 """A small scene for the farm tests and bench/farm.py, saved as a .blend: a waving Sheet and a
 moving Ball (hemishadow enabled: the animation cache bake), a Floor and a Box with lightmap
-UVs (the lightmaps), an Empty `Probes` over them (the probe grid), a sun and a plain World.
+UVs (the lightmaps), an Empty `Probes` over them (the probe grid), cameras `Cam` and `Cam2`
+(panoramas), a sun and a plain World.
 
     python tests/farm_scene.py OUT.blend [--grid N] [--frames F]
 """
@@ -66,6 +67,10 @@ def build(path, grid=24, frames=12):
     probes = bpy.context.object
     probes.name = "Probes"
     probes.empty_display_size = 2.5
+    for name, location in (("Cam", (0.5, -5.0, 1.6)), ("Cam2", (-3.0, 3.0, 2.0))):   # panoramas
+        bpy.ops.object.camera_add(location=location)
+        bpy.context.object.name = name
+    scene.camera = scene.objects["Cam"]
     scene.frame_set(1)
     bpy.ops.wm.save_as_mainfile(filepath=str(path))
     return path
