@@ -36,26 +36,31 @@ PROBE_ARGS = ["--volume", "Probes", "--resolution", "3", "3", "2", "--bounces", 
 BAKE_ARGS = ["--start", "1", "--end", "6"]
 
 
-def _addon():
+@pytest.fixture(scope="module")
+def addon():
+    """The checkout's add-on, registered for this module (and unregistered after it)."""
     if str(ROOT) not in sys.path:
         sys.path.insert(0, str(ROOT))
-    import addon
+    import addon as package
 
-    if not hasattr(bpy.types.Object, "hemishadow"):
-        addon.register()
-    return addon
+    registered_here = not hasattr(bpy.types.Object, "hemishadow")
+    if registered_here:
+        package.register()
+    yield package
+    if registered_here:
+        package.unregister()
 
 
 @pytest.fixture(scope="module")
-def blend(tmp_path_factory):
+def blend(tmp_path_factory, addon):
     folder = tmp_path_factory.mktemp("farm")
     return farm_scene.build(folder / "scene.blend", grid=10, frames=6)
 
 
 @pytest.fixture(scope="module")
-def single(blend):
+def single(blend, addon):
     """The single-machine outputs, through the headless commands (addon.cli.main)."""
-    cli = _addon().cli
+    cli = addon.cli
     for argv in (["bake", *BAKE_ARGS, "--cache-dir", "//single_cache"],
                  ["lightmaps", *LIGHTMAP_ARGS, "--out", "//single_lightmaps"],
                  ["probes", *PROBE_ARGS, "--out", "//single_probes/grid.npz"]):
@@ -214,10 +219,10 @@ def test_ctrl_c_cancels_and_writes_nothing(blend, cluster):
     assert not (blend.parent / "cancelled_cache").exists()
 
 
-def test_panoramas_one_unit_per_camera_give_the_same_files(blend, cluster):
+def test_panoramas_one_unit_per_camera_give_the_same_files(blend, cluster, addon):
     if not (ROOT / "addon" / "panorama_cli.py").is_file():
         pytest.skip("this checkout's add-on has no panorama baker (issue 13)")
-    cli = _addon().cli
+    cli = addon.cli
     for camera in ("Cam", "Cam2"):
         bpy.ops.wm.open_mainfile(filepath=str(blend))
         assert cli.main(["panorama", "--camera", camera, "--size", "32x16", "--out",
