@@ -197,6 +197,14 @@ def test_failures_say_why_and_write_nothing(blend, cluster, capsys, tmp_path, ca
     assert _files(blend.parent) == sorted(before)
 
 
+def test_subprocess_mode_without_blender_says_so(blend, tmp_path):
+    from hemishadow.farm import worker
+
+    unit = dict(units.base("bake", str(blend), [], str(ROOT)), object="Sheet", frames=[1, 1], start=1)
+    with pytest.raises(worker.FarmError, match="no Blender executable '/nowhere/blender' here"):
+        worker.run_subprocess(unit, None, blender="/nowhere/blender")
+
+
 def test_ctrl_c_cancels_and_writes_nothing(blend, cluster):
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT / "native" / "python"),
                                                        os.environ.get("PYTHONPATH", "")]))
