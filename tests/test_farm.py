@@ -242,6 +242,12 @@ def test_panoramas_one_unit_per_camera_give_the_same_files(blend, cluster, addon
         assert (blend.parent / "single_panoramas" / path).read_bytes() == (blend.parent / "panoramas" / path).read_bytes(), path
 
 
+def test_send_blend_gives_the_same_bytes(blend, single, cluster):
+    """--send-blend: the scheduler hands the file's bytes to the workers, which open their copy."""
+    assert _farm("bake", blend, cluster, *BAKE_ARGS, "--cache-dir", "//sent_cache", "--send-blend") == 0
+    assert_same_caches(single / "single_cache", single / "sent_cache")
+
+
 def test_subprocess_worker_mode_gives_the_same_bytes(blend, single, cluster, tmp_path):
     """A fake `blender` (the bpy module behind Blender's command line) runs each unit."""
     fake = tmp_path / "blender"

@@ -58,7 +58,7 @@ def _parser() -> argparse.ArgumentParser:
 
 def _add_farm(sub):
     """`farm` (hemishadow.farm.command): listed here, parsed there, as its other options go to the workers."""
-    sub.add_parser("farm", add_help=False, help="run a bake, lightmaps or probes on a Dask cluster "
+    sub.add_parser("farm", add_help=False, help="run a bake, lightmaps, probes or panoramas on a Dask cluster "
                                                 "(python -m hemishadow farm --help; docs/farm.md)")
 
 
