@@ -3,8 +3,8 @@
 the workers, which parse it with the add-on's own parser (`blender -b FILE --command hemishadow
 SUBCOMMAND --help` lists them), so the farm takes exactly the headless commands' options.
 
-Exit codes as the headless commands: 0 done, 1 failed (nothing written), 2 bad command line,
-130 cancelled with Ctrl-C (nothing written).
+Exit codes: 0 done, 1 failed (nothing written; also a bad option of the subcommand, which the
+workers parse), 2 a bad farm option, 130 cancelled with Ctrl-C (nothing written).
 """
 
 from __future__ import annotations
