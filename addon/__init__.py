@@ -4,12 +4,12 @@ Registration only. The engine (`hemishadow`, shipped as a wheel inside the exten
 imported lazily by the modules that compute, so registering never loads it.
 """
 
-from . import (cli, handlers, lightmap_panel, lightmap_settings, operators, panels, panorama_live, panorama_panel,
-               panorama_settings, probe_panel, properties)
+from . import (cli, farm_panel, handlers, lightmap_panel, lightmap_settings, operators, panels, panorama_live,
+               panorama_panel, panorama_settings, probe_panel, properties)
 
 # Properties first: operators and panels refer to them; handlers last, once all is in place.
-_modules = (properties, lightmap_settings, panorama_settings, operators, panels, lightmap_panel, probe_panel,
-            panorama_panel, cli, handlers, panorama_live)
+_modules = (properties, lightmap_settings, panorama_settings, operators, panels, farm_panel, lightmap_panel,
+            probe_panel, panorama_panel, cli, handlers, panorama_live)
 
 
 def register():

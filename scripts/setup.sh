@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Make the project-local environments and build the Rust engine into the primary one.
 #
-#   .venv          Python 3.13, requirements.txt (bpy 5.3, the primary test version), the engine
+#   .venv          Python 3.13, requirements.txt (bpy 5.3, the primary test version; Dask's
+#                  `distributed` for the farm client and its workers, docs/farm.md), the engine
 #                  built in release mode (maturin develop);
 #   .venv-X.Y      with --all: one per requirements-X.Y.txt, the second-tier Blender versions
 #                  (bpy X.Y on the Python named in that file); the engine comes from the zip.

@@ -54,6 +54,7 @@ def _parser() -> argparse.ArgumentParser:
                         "Lighting is computed in Blender's +Z-up world; written vertices "
                         "stay as in the input file")
     _add_panorama_commands(sub)
+    _add_farm(sub)
     return parser
 
 
@@ -205,6 +206,12 @@ def run_panorama(args) -> int:
     return 0
 
 
+def _add_farm(sub):
+    """`farm` (hemishadow.farm.command): listed here, parsed there, as its other options go to the workers."""
+    sub.add_parser("farm", add_help=False, help="run a bake, lightmaps, probes or panoramas on a Dask cluster "
+                                                "(python -m hemishadow farm --help; docs/farm.md)")
+
+
 def _output_paths(mesh_path: str, out: str | None) -> tuple[str, str]:
     """(colored mesh path, npz path) from --out."""
     if out is None:
@@ -333,6 +340,11 @@ def _cancelled() -> int:
 
 
 def main(argv=None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv[:1] == ["farm"]:
+        from .farm.command import main as farm
+
+        return farm(argv[1:])
     args = _parser().parse_args(argv)
     try:
         if args.command == "serve":

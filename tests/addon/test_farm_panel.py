@@ -1,0 +1,75 @@
+"""The Farm section of the Actions panel (issue 14): it submits the saved .blend's job as
+`PYTHON -m hemishadow farm KIND FILE --scheduler ADDRESS [options]`, refuses an unsaved file
+(and saves nothing itself), follows the process and cancels it with Ctrl-C."""
+
+import os
+import sys
+import time
+
+import pytest
+
+bpy = pytest.importorskip("bpy")
+
+
+@pytest.fixture
+def saved(scene, tmp_path):
+    bpy.ops.mesh.primitive_cube_add()
+    cube = bpy.context.object
+    cube.name = "Cube"
+    cube.hemishadow.enabled = True
+    scene.frame_start, scene.frame_end = 3, 9
+    path = tmp_path / "farm.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    return path
+
+
+def test_unsaved_file_is_refused_and_nothing_is_saved(scene):
+    from addon import farm_panel
+
+    assert not bpy.data.filepath
+    scene.hemishadow_farm.python = sys.executable
+    with pytest.raises(ValueError, match="save the .blend first"):
+        farm_panel.farm_command(bpy.context)
+    with pytest.raises(RuntimeError, match="save the .blend first"):   # the operator's error report
+        bpy.ops.hemishadow.farm_submit()
+    assert not bpy.data.filepath and farm_panel.current() is None
+
+
+def test_the_command_is_the_bake_buttons_job_on_the_saved_file(saved):
+    from addon import farm_panel
+
+    settings = bpy.context.scene.hemishadow_farm
+    settings.python = "/opt/venv/bin/python"
+    command = farm_panel.farm_command(bpy.context)
+    assert command[:6] == ["/opt/venv/bin/python", "-m", "hemishadow", "farm", "bake", str(saved)]
+    assert command[6:8] == ["--scheduler", "tcp://127.0.0.1:8786"]   # loopback unless told
+    assert command[8:] == ["--start", "3", "--end", "9", "--scene", "Scene", "--objects", "Cube"]
+    settings.kind, settings.address = "lightmaps", "tls://farm:8786"
+    bpy.context.scene.hemishadow_lightmaps.resolution = 128
+    bpy.context.scene.objects["Cube"].select_set(True)
+    command = farm_panel.farm_command(bpy.context)
+    assert command[4] == "lightmaps" and "tls://farm:8786" in command
+    assert command[command.index("--resolution") + 1] == "128" and "Cube" in command
+
+
+def test_submit_follows_the_process_and_cancel_sends_ctrl_c(saved, tmp_path):
+    from addon import farm_panel
+
+    fake = tmp_path / "python"   # prints a progress line, then waits; Ctrl-C exits 130 as the client does
+    fake.write_text("#!/bin/sh\ntrap 'echo cancelled; exit 130' INT\necho \"hemishadow farm: [1/4] $4\"\n"
+                    "while true; do sleep 0.1; done\n")
+    fake.chmod(0o755)
+    bpy.context.scene.hemishadow_farm.python = str(fake)
+    mtime = os.stat(saved).st_mtime_ns
+    assert bpy.ops.hemishadow.farm_submit() == {"FINISHED"}
+    run = farm_panel.current()
+    deadline = time.time() + 10
+    while not run.lines and time.time() < deadline:
+        time.sleep(0.05)
+    assert run.status == "running: hemishadow farm: [1/4] bake"
+    with pytest.raises(RuntimeError, match="a farm job is running"):   # one job at a time
+        bpy.ops.hemishadow.farm_submit()
+    assert bpy.ops.hemishadow.farm_cancel() == {"FINISHED"}
+    assert run.process.wait(timeout=10) == 130
+    assert run.status == "cancelled: nothing written"
+    assert os.stat(saved).st_mtime_ns == mtime   # nothing saved
