@@ -3,9 +3,10 @@ whose object has a hemishadow lightmap shows the probes the radiance that lightm
 (`hemishadow.probes.baked`), instead of bounce passes computed again.
 
 A lightmap is found as the lightmap bake leaves it (lightmaps.py): the Blender image
-`hemishadow_<object>_flat` (what the scene shows), else the file `<folder>/<object>.exr`
-(its `flat` layer; the folder of the scene's Lightmaps settings, default `//lightmaps`); it
-is read through the UV map those settings name (default `lightmap`). Objects without one,
+`hemishadow_<object>_flat` read through the UV map the scene's Lightmaps settings name
+(default `lightmap`), or its atlas's `hemishadow_<atlas>_flat` through `hemishadow_lightmap`
+(whichever is newer, as the materials pick), else the file `<folder>/<object>.exr` (its
+`flat` layer; the folder of the Lightmaps settings, default `//lightmaps`). Objects without one,
 or without that UV map, are computed as before.
 """
 
@@ -14,7 +15,7 @@ import os
 import bpy
 import numpy as np
 
-from . import lightmaps
+from . import lightmap_nodes, lightmaps
 
 
 def _settings(scene, name, default):
@@ -26,20 +27,23 @@ def uv_name(scene):
 
 
 def flat_map(obj, scene):
-    """The object's baked `flat` map (R, R', 3), rows top to bottom, or None."""
-    image = bpy.data.images.get(f"{lightmaps.IMAGE_PREFIX}{obj.name}_flat")
+    """(the object's baked `flat` map (R, R', 3), rows top to bottom, the UV map reading it),
+    or (None, None): its own image, or its atlas's through `hemishadow_lightmap`
+    (lightmap_nodes.lightmap_of, as the materials read them), else its own EXR."""
+    images, uv, _ = lightmap_nodes.lightmap_of(obj, uv_name(scene))
+    image = images.get("flat")
     if image is not None and image.size[0] > 0 and image.size[1] > 0:
         w, h = image.size
         pixels = np.empty(w * h * 4, np.float32)
         image.pixels.foreach_get(pixels)
-        return pixels.reshape(h, w, 4)[::-1, :, :3]  # Blender's rows start at the bottom
+        return pixels.reshape(h, w, 4)[::-1, :, :3], uv  # Blender's rows start at the bottom
     folder = lightmaps.output_folder(_settings(scene, "directory", None))
     path = os.path.join(folder, f"{lightmaps._safe(obj.name)}.exr") if folder else None
     if path and os.path.isfile(path):
         import hemishadow.lightmap as lm
 
-        return lm.read_exr(path).get("flat")
-    return None
+        return lm.read_exr(path).get("flat"), uv_name(scene)
+    return None, None
 
 
 def vertex_light(scene, surfaces, depsgraph=None):
@@ -48,11 +52,11 @@ def vertex_light(scene, surfaces, depsgraph=None):
     import hemishadow.probes as hp
 
     depsgraph = depsgraph or bpy.context.evaluated_depsgraph_get()
-    name, out = uv_name(scene), {}
+    out = {}
     for surface in surfaces:
         obj = scene.objects.get(surface.name)
-        flat = None if obj is None or name not in obj.data.uv_layers else flat_map(obj, scene)
-        if flat is None:
+        flat, name = flat_map(obj, scene) if obj is not None else (None, None)
+        if flat is None or name not in obj.data.uv_layers:
             continue
         data = lightmaps.read_mesh(obj, depsgraph, name)
         if len(data.triangles) != len(surface.triangles):

@@ -96,13 +96,18 @@ def test_bounce_from_baked_lightmaps_matches_the_computed_bounce(addon):
     scene, floor, wall = lit_wall(addon)
     computed, plain = bounce_of(addon, scene)
     assert plain["lightmapped"] == [] and computed.max() > 0.05
-    addon.lightmaps.bake_lightmaps(scene, [floor, wall], resolution=32, bounces=0)
-    from_maps, lit = bounce_of(addon, scene)
-    assert len(lit["lightmapped"]) == 2
-    assert any("bounce light from the baked lightmaps of 2 object" in n for n in lit["notes"])
-    err = (np.abs(from_maps - computed).max(axis=(1, 2)) / computed.max(axis=(1, 2)))
-    print(f"bounce, lightmaps against computed, per probe: {np.round(100 * err, 2).tolist()} %")
-    assert err.max() < 0.05, err
+    # One atlas (the default for several objects, read through hemishadow_lightmap), then
+    # per-object maps (their own images, through `lightmap`): the newer bake is the one read.
+    for layout in ("ATLAS", "OBJECT"):
+        addon.lightmaps.bake_lightmaps(scene, [floor, wall], resolution=32, bounces=0, layout=layout)
+        from_maps, lit = bounce_of(addon, scene)
+        assert len(lit["lightmapped"]) == 2, layout
+        assert any("bounce light from the baked lightmaps of 2 object" in n for n in lit["notes"])
+        err = (np.abs(from_maps - computed).max(axis=(1, 2)) / computed.max(axis=(1, 2)))
+        print(f"bounce, {layout} lightmaps against computed, per probe: {np.round(100 * err, 2).tolist()} %")
+        assert err.max() < 0.05, (layout, err)
+    for image in [i for i in bpy.data.images if i.name.startswith("hemishadow_atlas_")]:
+        bpy.data.images.remove(image)  # from here on, the per-object maps alone
 
     for name in ("Wall", "Floor"):
         scale_image(f"hemishadow_{name}_flat", 2.0)
@@ -126,7 +131,7 @@ def test_lightmaps_written_to_files_only_are_read_from_their_exr(addon, tmp_path
     computed, _ = bounce_of(addon, scene)
     scene.hemishadow_lightmaps.directory = str(tmp_path)
     addon.lightmaps.bake_lightmaps(scene, [floor, wall], resolution=32, bounces=0, out_dir=str(tmp_path),
-                                   images=False)
+                                   images=False, layout="OBJECT")  # an atlas's file names no object
     assert not [i for i in bpy.data.images if i.name.startswith("hemishadow_")]
     from_files, lit = bounce_of(addon, scene)
     assert len(lit["lightmapped"]) == 2
