@@ -9,6 +9,7 @@ caller (a script, a test) overrides its setting.
 import bpy
 
 from .. import lightmap_atlas, lightmap_job, lightmap_nodes, lightmap_settings, lightmaps
+from .modal_job import ModalJob
 
 _OVERRIDABLE = ("uv_name", "resolution", "basis", "bounces", "samples", "margin", "layout", "atlas_name")
 
@@ -37,7 +38,7 @@ def _summary(written):
     return f"hemishadow: baked {len(written)} lightmap(s) to {', '.join(where)}"
 
 
-class HEMISHADOW_OT_bake_lightmaps(bpy.types.Operator):
+class HEMISHADOW_OT_bake_lightmaps(ModalJob, bpy.types.Operator):
     """Bake directional lightmaps (flat, HL2 basis or L1 SH, AO) of the chosen mesh objects (Esc cancels, writing nothing)"""
 
     bl_idname = "hemishadow.bake_lightmaps"
@@ -62,9 +63,7 @@ class HEMISHADOW_OT_bake_lightmaps(bpy.types.Operator):
     directory: bpy.props.StringProperty(name="Folder", default="", subtype="DIR_PATH",
                                         description="Where <object>.exr goes (default //lightmaps beside the .blend)")
 
-    _job = None
-    _timer = None
-    _area = None
+    noun = "lightmap"
 
     @classmethod
     def poll(cls, context):
@@ -89,77 +88,28 @@ class HEMISHADOW_OT_bake_lightmaps(bpy.types.Operator):
         finally:
             wm.progress_end()
         _report_warnings(self, [str(w.message) for w in caught])
-        self._finished(context, written)
-        return {"FINISHED"}
+        return self.finished(context, written)
 
     def invoke(self, context, event):
         if bpy.app.background or context.window is None:
             return self.execute(context)
         objects, kwargs, directory = _arguments(self, context)
         try:
-            self._job = lightmap_job.LightmapBake(context.scene, objects, out_dir=directory, **kwargs).start()
+            job = lightmap_job.LightmapBake(context.scene, objects, out_dir=directory, **kwargs)
         except (ValueError, OSError) as error:
             self.report({"ERROR"}, str(error))
             return {"CANCELLED"}
-        wm = context.window_manager
-        wm.progress_begin(0, 1000)
-        self._timer = wm.event_timer_add(0.1, window=context.window)
-        self._area = context.area
-        wm.modal_handler_add(self)
-        self._status(context, "Baking lightmaps")
-        return {"RUNNING_MODAL"}
+        return self.start_modal(context, job)
 
-    def modal(self, context, event):
-        job = self._job
-        if event.type == "ESC" and event.value == "PRESS":
-            job.cancel()  # step() below returns CANCELLED at once; the worker stops at its next report
-        elif event.type != "TIMER":
-            return {"PASS_THROUGH"}  # the UI stays usable while the worker bakes
-        state = job.step()
-        if state == lightmap_job.RUNNING:
-            context.window_manager.progress_update(int(1000 * job.fraction))
-            self._status(context, f"Baking lightmaps of {len(job.names)} object(s): {100 * job.fraction:.0f} % "
-                                  "(Esc cancels)")
-            return {"RUNNING_MODAL"}
-        self._end(context)
-        _report_warnings(self, job.warnings)
-        if state == lightmap_job.CANCELLED:
-            self.report({"WARNING"}, "hemishadow: lightmap bake cancelled; nothing was written")
-            return {"CANCELLED"}
-        if state == lightmap_job.FAILED:
-            self.report({"ERROR"}, f"hemishadow: lightmap bake failed, nothing written: {job.error}")
-            return {"CANCELLED"}
-        self._finished(context, job.written)
-        return {"FINISHED"}
+    def status(self, job):
+        return f"Baking lightmaps of {len(job.names)} object(s): {100 * job.fraction:.0f} % (Esc cancels)"
 
-    def cancel(self, context):  # Blender ends the operator (file closed, window gone)
-        if self._job is not None:
-            self._job.cancel()
-        self._end(context)
-
-    def _status(self, context, text):
-        if context.workspace is not None:
-            context.workspace.status_text_set(text)
-        if self._area is not None:
-            self._area.header_text_set(text)
-
-    def _end(self, context):
-        wm = context.window_manager
-        if self._timer is not None:
-            wm.event_timer_remove(self._timer)
-            self._timer = None
-        wm.progress_end()
-        if context.workspace is not None:
-            context.workspace.status_text_set(None)
-        if self._area is not None:
-            self._area.header_text_set(None)
-            self._area = None
-
-    def _finished(self, context, written):
+    def finished(self, context, written):
         skipped = lightmaps.unsupported_lamps(context.scene)
         if skipped:
             self.report({"WARNING"}, f"lamps not baked yet (point, spot, area): {', '.join(skipped)}")
         self.report({"INFO"}, _summary(written))
+        return {"FINISHED"}
 
 
 class HEMISHADOW_OT_make_lightmap_uv(bpy.types.Operator):

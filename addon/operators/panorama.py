@@ -5,21 +5,21 @@ the work; the settings are the scene's (`Scene.hemishadow_panorama`, the Panoram
 import bpy
 
 from .. import panorama_bake, panorama_job, panorama_live, panorama_settings
+from .modal_job import ModalJob
 
 
 def _path(context):
     return bpy.path.abspath(context.scene.hemishadow_panorama.filepath or "//panoramas/panorama.exr")
 
 
-class HEMISHADOW_OT_bake_panorama(bpy.types.Operator):
+class HEMISHADOW_OT_bake_panorama(ModalJob, bpy.types.Operator):
     """Bake a relightable panorama (SH coefficients per pixel) from the chosen camera or point (Esc cancels, writing nothing)"""
 
     bl_idname = "hemishadow.bake_panorama"
     bl_label = "Bake Panorama"
     bl_options = {"REGISTER"}
 
-    _job = None
-    _timer = None
+    noun = "panorama"
 
     @classmethod
     def poll(cls, context):
@@ -38,60 +38,20 @@ class HEMISHADOW_OT_bake_panorama(bpy.types.Operator):
             return {"CANCELLED"}
         finally:
             wm.progress_end()
-        return self._finished(context, paths)
+        return self.finished(context, paths)
 
     def invoke(self, context, event):
         if bpy.app.background or context.window is None:
             return self.execute(context)
         try:
-            self._job = panorama_job.PanoramaBake(context.scene, _path(context),
-                                                  **panorama_settings.bake_arguments(context.scene)).start()
+            job = panorama_job.PanoramaBake(context.scene, _path(context),
+                                            **panorama_settings.bake_arguments(context.scene))
         except (ValueError, OSError, RuntimeError) as error:
             self.report({"ERROR"}, str(error))
             return {"CANCELLED"}
-        wm = context.window_manager
-        wm.progress_begin(0, 1000)
-        self._timer = wm.event_timer_add(0.1, window=context.window)
-        wm.modal_handler_add(self)
-        return {"RUNNING_MODAL"}
+        return self.start_modal(context, job)
 
-    def modal(self, context, event):
-        job = self._job
-        if event.type == "ESC" and event.value == "PRESS":
-            job.cancel()
-            return {"RUNNING_MODAL"}
-        if event.type != "TIMER":
-            return {"PASS_THROUGH"}
-        state = job.step()
-        if state == panorama_job.RUNNING:
-            context.window_manager.progress_update(int(1000 * job.fraction))
-            if context.workspace is not None:
-                context.workspace.status_text_set(f"Baking panorama: {100 * job.fraction:.0f} % (Esc cancels)")
-            return {"RUNNING_MODAL"}
-        self._end(context)
-        if state == panorama_job.CANCELLED:
-            self.report({"WARNING"}, "hemishadow: panorama bake cancelled; nothing was written")
-            return {"CANCELLED"}
-        if state == panorama_job.FAILED:
-            self.report({"ERROR"}, f"hemishadow: panorama bake failed, nothing written: {job.error}")
-            return {"CANCELLED"}
-        return self._finished(context, job.written)
-
-    def cancel(self, context):
-        if self._job is not None:
-            self._job.cancel()
-        self._end(context)
-
-    def _end(self, context):
-        wm = context.window_manager
-        if self._timer is not None:
-            wm.event_timer_remove(self._timer)
-            self._timer = None
-        wm.progress_end()
-        if context.workspace is not None:
-            context.workspace.status_text_set(None)
-
-    def _finished(self, context, paths):
+    def finished(self, context, paths):
         settings = context.scene.hemishadow_panorama
         settings.baked = paths[1]  # relight from the compact 8-bit maps
         self.report({"INFO"}, f"hemishadow: panorama written to {paths[0]} and {paths[1]}")
