@@ -16,6 +16,7 @@ ROOT = pathlib.Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 import addon  # noqa: E402
 from addon import lightmap_job, lightmaps, world  # noqa: E402
+from lightmap_scenes import white_world  # noqa: E402
 
 engine = importlib.import_module("hemishadow.lightmap.bake")
 LIMIT = 0.2
@@ -37,14 +38,8 @@ STAGES = {
 
 @pytest.fixture
 def scene():
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    world.clear_cache()
-    scene = bpy.context.scene
-    scene.world = bpy.data.worlds.new("World")
-    if scene.world.node_tree is None:  # Blender before 5.0
-        scene.world.use_nodes = True
-    scene.world.node_tree.nodes["Background"].inputs["Strength"].default_value = 1.0
-    addon.register()
+    scene = white_world(world, color=None)
+    addon.register()  # last: a failed set-up must not leave it registered
     yield scene
     addon.unregister()
 

@@ -16,6 +16,7 @@ ROOT = pathlib.Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 import addon  # noqa: E402
 from addon import lightmap_albedo, lightmap_job, lightmap_nodes, lightmaps, world  # noqa: E402
+from lightmap_scenes import plane, white_world  # noqa: E402
 
 FLAT_B = (1 + 1 / math.sqrt(3)) / 2
 
@@ -30,27 +31,10 @@ def new_material(name):
 
 @pytest.fixture
 def scene():
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    world.clear_cache()
-    scene = bpy.context.scene
-    scene.world = bpy.data.worlds.new("World")
-    if scene.world.node_tree is None:  # Blender before 5.0
-        scene.world.use_nodes = True
-    background = scene.world.node_tree.nodes["Background"]
-    background.inputs["Color"].default_value = (1, 1, 1, 1)
-    background.inputs["Strength"].default_value = 1.0
+    scene = white_world(world)
     addon.register()  # last: a failed set-up must not leave it registered
     yield scene
     addon.unregister()
-
-
-def plane(name="Floor", size=4.0, uv="lightmap", location=(0, 0, 0)):
-    bpy.ops.mesh.primitive_plane_add(size=size, location=location)
-    obj = bpy.context.active_object
-    obj.name = name
-    if uv:
-        obj.data.uv_layers.new(name=uv)  # a copy of the active UV map: the unit square
-    return obj
 
 
 def snapshot():

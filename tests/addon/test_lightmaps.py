@@ -17,28 +17,12 @@ import hemishadow.lightmap as lm  # noqa: E402
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 from addon import lightmaps, world  # noqa: E402
+from lightmap_scenes import plane, white_world  # noqa: E402
 
 
 @pytest.fixture
 def scene():
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    world.clear_cache()
-    scene = bpy.context.scene
-    scene.world = bpy.data.worlds.new("World")
-    scene.world.use_nodes = True
-    background = scene.world.node_tree.nodes["Background"]
-    background.inputs["Color"].default_value = (1, 1, 1, 1)
-    background.inputs["Strength"].default_value = 1.0
-    return scene
-
-
-def plane(name="Floor", size=4.0, uv="lightmap"):
-    bpy.ops.mesh.primitive_plane_add(size=size)
-    obj = bpy.context.active_object
-    obj.name = name
-    if uv:
-        obj.data.uv_layers.new(name=uv)  # a copy of the active UV map: the unit square
-    return obj
+    return white_world(world)
 
 
 def test_open_plane_under_a_white_world(scene, tmp_path):

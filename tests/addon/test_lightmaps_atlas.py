@@ -17,22 +17,15 @@ ROOT = pathlib.Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 import addon  # noqa: E402
 from addon import lightmap_atlas, lightmap_nodes, lightmaps, world  # noqa: E402
+from lightmap_scenes import white_world  # noqa: E402
 
 ATLAS_UV = lightmap_atlas.ATLAS_UV
 
 
 @pytest.fixture
 def scene():
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    world.clear_cache()
-    scene = bpy.context.scene
-    scene.world = bpy.data.worlds.new("World")
-    if scene.world.node_tree is None:  # Blender before 5.0
-        scene.world.use_nodes = True
-    background = scene.world.node_tree.nodes["Background"]
-    background.inputs["Color"].default_value = (1, 1, 1, 1)
-    background.inputs["Strength"].default_value = 1.0
-    addon.register()
+    scene = white_world(world)
+    addon.register()  # last: a failed set-up must not leave it registered
     yield scene
     addon.unregister()
 
