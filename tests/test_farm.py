@@ -62,7 +62,8 @@ def single(blend, addon):
     """The single-machine outputs, through the headless commands (addon.cli.main)."""
     cli = addon.cli
     for argv in (["bake", *BAKE_ARGS, "--cache-dir", "//single_cache"],
-                 ["lightmaps", *LIGHTMAP_ARGS, "--out", "//single_lightmaps"],
+                 ["lightmaps", *LIGHTMAP_ARGS, "--per-object", "--out", "//single_lightmaps"],
+                 ["lightmaps", *LIGHTMAP_ARGS, "--out", "//single_atlas"],
                  ["probes", *PROBE_ARGS, "--out", "//single_probes/grid.npz"]):
         bpy.ops.wm.open_mainfile(filepath=str(blend))
         assert cli.main(argv) == 0, argv
@@ -125,12 +126,15 @@ def test_farm_outputs_equal_the_single_machine_bake(blend, single, cluster):
 
     import hemishadow.lightmap as lm
 
-    assert _farm("lightmaps", blend, cluster, *LIGHTMAP_ARGS, "--out", "//farm_lightmaps") == 0
-    for name in ("Floor", "Box"):
-        a, b = lm.read_exr(single / "single_lightmaps" / f"{name}.exr"), lm.read_exr(single / "farm_lightmaps" / f"{name}.exr")
+    # per object (a unit each), and the default atlas of both (one unit: its layout spans them)
+    assert _farm("lightmaps", blend, cluster, *LIGHTMAP_ARGS, "--per-object", "--out", "//farm_lightmaps") == 0
+    assert _farm("lightmaps", blend, cluster, *LIGHTMAP_ARGS, "--out", "//farm_atlas") == 0
+    for folder, name in (("lightmaps", "Floor"), ("lightmaps", "Box"), ("atlas", "atlas")):
+        a, b = (lm.read_exr(single / f"{side}_{folder}" / f"{name}.exr") for side in ("single", "farm"))
         assert a.keys() == b.keys()
         for key in a:
             assert np.array_equal(a[key], b[key]), (name, key)   # bit for bit
+    assert sorted(p.name for p in (single / "farm_atlas").iterdir()) == ["atlas.exr"]
 
     import hemishadow.probes as hp
 

@@ -135,7 +135,7 @@ class Job:
             return [merge.resolve(p, self.blend) for p in plan["outputs"].values()]
         if self.kind == "lightmaps":
             folder = merge.resolve(plan["folder"], self.blend)
-            return [os.path.join(folder, f"{merge._safe(n)}.exr") for n in plan["objects"]]
+            return [os.path.join(folder, f"{merge._safe(n)}.exr") for n in plan["outputs"]]
         if self.kind == "panorama":
             return [merge.resolve(path, self.blend) for _, path in plan["outputs"]]
         return [merge.resolve(plan["output"], self.blend)]

@@ -124,8 +124,8 @@ def write_lightmaps(plan, results, blend):
     maps = {r["object"]: r["maps"] for r in results}
     folder = resolve(plan["folder"], blend)
     files = [(os.path.join(folder, f"{_safe(name)}.exr"), lambda path, m=maps[name]: lm.write_exr(path, m))
-             for name in plan["objects"]]
-    return dict(zip(plan["objects"], write_all(files)))
+             for name in plan["outputs"]]
+    return dict(zip(plan["outputs"], write_all(files)))
 
 
 # ---------------------------------------------------------------------------------------

@@ -66,7 +66,7 @@ def make(plan, unit_base, workers, frames_per_unit=None, probes_per_unit=None):
                     for s in range(a, b + 1, size)]
         return out
     if kind == "lightmaps":
-        return [dict(unit_base, object=name) for name in plan["objects"]]
+        return [dict(unit_base, object=name) for name in plan["outputs"]]   # objects, or one atlas
     if kind == "probes":
         count = plan["count"]
         chunks = math.ceil(count / PROBE_CHUNK)

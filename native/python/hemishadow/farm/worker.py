@@ -165,7 +165,9 @@ def _plan(unit):
                     pack=args.pack, save=args.save, cache_dir=args.cache_dir)
     elif kind == "lightmaps":
         found = module("lightmaps_cli").objects(scene, args, lambda m: FarmError(f"hemishadow farm: error: {m}"))
-        plan.update(objects=[o.name for o in found], folder=args.out or "//lightmaps")
+        names = [o.name for o in found]
+        atlas = _atlas(args, found)   # one unit for an atlas: its layout and padding span every object
+        plan.update(objects=names, outputs=[atlas] if atlas else names, folder=args.out or "//lightmaps")
     elif kind == "probes":
         import numpy as np
 
@@ -262,6 +264,14 @@ def _seed_solver(job, obj, start, scene, mesh_io, bake):
     job._solvers[obj.name] = (key, bake._make_solver(obj, vertices, triangles, frame.matrix))
 
 
+def _atlas(args, found):
+    """The atlas's name when the headless command would bake one (several objects, no --uv,
+    no --per-object: lightmaps_cli.run), else None."""
+    if args.per_object or args.uv is not None or len(found) < 2:
+        return None
+    return module("lightmap_atlas").atlas_name(args.atlas)
+
+
 def _lightmaps(unit):
     """One object's lightmap: the scene read as for the whole bake (same engine scene, same
     bounce receivers in the same order), the engine's bake run on this target only."""
@@ -276,9 +286,15 @@ def _lightmaps(unit):
     found = module("lightmaps_cli").objects(scene, args, lambda m: FarmError(f"hemishadow farm: error: {m}"))
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        prepared = lightmaps.prepare(scene, found, uv_name=args.uv, resolution=args.resolution,
-                                     texel_density=args.texel_density, basis=args.basis, bounces=args.bounces,
-                                     samples=args.samples, margin=args.margin)
+        prepared = lightmaps.prepare(scene, found, uv_name=args.uv or lightmaps.DEFAULT_UV,
+                                     layout="ATLAS" if _atlas(args, found) else "OBJECT", atlas_name=args.atlas,
+                                     resolution=args.resolution, texel_density=args.texel_density, basis=args.basis,
+                                     bounces=args.bounces, samples=args.samples, margin=args.margin)
+    if prepared.atlas:
+        t1 = time.perf_counter()
+        maps = lightmaps.compute(prepared)[0]
+        return dict(object=unit["object"], maps=maps, warnings=[str(w.message) for w in caught],
+                    seconds=dict(setup=t1 - t0, work=time.perf_counter() - t1))
     k = lightmaps.baked_names(prepared.targets).index(unit["object"])
     # Every target's surface among the surfaces, in the whole bake's order: the engine keeps the
     # first of each mesh, so the bounce receivers are the single-machine bake's.
