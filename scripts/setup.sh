@@ -171,10 +171,10 @@ esac
 
 make_venv "$VENV" "$PRIMARY_PYTHON"
 check_rust
-check_chromium
 install_requirements "$VENV" requirements.txt
 build_engine
-if [ "$ALL" = 1 ]; then
+if [ "$ALL" = 1 ]; then   # what only the tests need
+    check_chromium
     setup_tier2
 fi
 say "done"
