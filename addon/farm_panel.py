@@ -18,12 +18,13 @@ import threading
 import bpy
 from bpy.props import EnumProperty, PointerProperty, StringProperty
 
-from . import lightmap_settings, probes
+from . import lightmap_settings, panorama_settings, probes
 
 LOOPBACK = "tcp://127.0.0.1:8786"
 KINDS = [("bake", "Animation Cache", "Bake the frame range of the objects Bake Animation would bake"),
          ("lightmaps", "Lightmaps", "Bake the Lightmaps panel's objects with its settings"),
-         ("probes", "Probes", "Bake the active Light Probe Volume or Empty")]
+         ("probes", "Probes", "Bake the active Light Probe Volume or Empty"),
+         ("panorama", "Panorama", "Bake the Panorama panel's panorama with its settings")]
 
 
 class HemishadowFarmSettings(bpy.types.PropertyGroup):
@@ -54,9 +55,21 @@ def job_arguments(context, kind):
         size = (["--texel-density", str(settings.texel_density)] if settings.size_mode == "DENSITY"
                 else ["--resolution", str(settings.resolution)])
         out = ["--out", settings.directory] if settings.directory else []
-        return ["--objects", *[o.name for o in objects], "--uv", settings.uv_name, *size, "--basis", settings.basis,
+        layout = (["--atlas", settings.atlas_name, "--islands", settings.uv_name]
+                  if settings.layout == "ATLAS" and len(objects) > 1 else ["--uv", settings.uv_name])
+        return ["--objects", *[o.name for o in objects], *layout, *size, "--basis", settings.basis,
                 "--bounces", str(settings.bounces), "--samples", str(settings.samples), "--margin",
                 str(settings.margin), "--scene", scene.name, *out]
+    if kind == "panorama":
+        where = panorama_settings.bake_arguments(scene)
+        if where.get("at") is not None:
+            place = ["--at", ",".join(f"{v:g}" for v in where["at"])]
+        else:
+            place = ["--camera", where["camera"]] if where.get("camera") else []
+        out = ["--out", scene.hemishadow_panorama.filepath] if scene.hemishadow_panorama.filepath else []
+        width, height = where["size"]
+        return [*place, "--size", f"{width}x{height}", "--coefficients", str(where["coefficients"]),
+                "--bounces", str(where["bounces"]), "--scene", scene.name, *out]
     volume = probes.active_volume(context)
     if volume is None:
         raise ValueError("make a Light Probe Volume or an Empty active")

@@ -24,6 +24,8 @@ def add_parser(commands):
                    help="several objects (the default without --uv): one DIR/NAME.exr, the objects' islands "
                         f"(from {lightmaps.DEFAULT_UV!r}, else Lightmap Pack) packed at one texel density into "
                         f"the bake's own UV map {lightmap_atlas.ATLAS_UV!r} (default: %(default)s)")
+    p.add_argument("--islands", default=lightmaps.DEFAULT_UV, metavar="NAME",
+                   help="for an atlas: the UV map whose islands it packs (default: %(default)s)")
     size = p.add_mutually_exclusive_group()
     size.add_argument("--resolution", type=int, default=256, metavar="PX", help="texels per side (default: 256)")
     size.add_argument("--texel-density", type=float, metavar="PER_M",
@@ -71,7 +73,7 @@ def run(scene, found, args, progress):
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         layout = "OBJECT" if args.per_object or args.uv is not None else "ATLAS"
-        written = lightmaps.bake_lightmaps(scene, found, uv_name=args.uv or lightmaps.DEFAULT_UV,
+        written = lightmaps.bake_lightmaps(scene, found, uv_name=args.uv or args.islands,
                                            layout=layout, atlas_name=args.atlas, resolution=args.resolution,
                                            texel_density=args.texel_density, basis=args.basis, bounces=args.bounces,
                                            samples=args.samples, margin=args.margin, out_dir=args.out,

@@ -73,3 +73,37 @@ def test_submit_follows_the_process_and_cancel_sends_ctrl_c(saved, tmp_path):
     assert run.process.wait(timeout=10) == 130
     assert run.status == "cancelled: nothing written"
     assert os.stat(saved).st_mtime_ns == mtime   # nothing saved
+
+
+def test_the_lightmap_and_panorama_jobs_follow_their_panels(saved):
+    """What the panel submits parses with the headless commands' own parser into the panels'
+    settings: the Lightmaps panel's atlas (or per-object layout) and the Panorama panel's
+    viewpoint, size, coefficients and bounces."""
+    from addon import cli, farm_panel
+
+    scene = bpy.context.scene
+    scene.hemishadow_farm.python = "/opt/venv/bin/python"
+    bpy.ops.mesh.primitive_plane_add(location=(0, 0, -1))
+    for obj in scene.objects:
+        obj.select_set(obj.type == "MESH")
+    scene.hemishadow_farm.kind = "lightmaps"
+    lm = scene.hemishadow_lightmaps
+    lm.layout, lm.atlas_name, lm.uv_name = "ATLAS", "level", "islands_here"
+    bpy.ops.wm.save_mainfile()
+    args = cli.build_parser().parse_args(["lightmaps", *farm_panel.farm_command(bpy.context)[8:]])
+    assert args.uv is None and not args.per_object and (args.atlas, args.islands) == ("level", "islands_here")
+    lm.layout = "OBJECT"
+    bpy.ops.wm.save_mainfile()
+    args = cli.build_parser().parse_args(["lightmaps", *farm_panel.farm_command(bpy.context)[8:]])
+    assert args.uv == "islands_here"
+
+    scene.hemishadow_farm.kind = "panorama"
+    pano = scene.hemishadow_panorama
+    pano.source, pano.point = "POINT", (1.0, -2.5, 0.75)
+    pano.width, pano.height, pano.coefficients, pano.bounces = 256, 128, "25", 1
+    bpy.ops.wm.save_mainfile()
+    command = farm_panel.farm_command(bpy.context)
+    assert command[4] == "panorama"
+    args = cli.build_parser().parse_args(["panorama", *command[8:]])
+    assert tuple(args.at) == (1.0, -2.5, 0.75) and tuple(args.size) == (256, 128)
+    assert (args.coefficients, args.bounces) == (25, 1)

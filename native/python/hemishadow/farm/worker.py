@@ -286,7 +286,7 @@ def _lightmaps(unit):
     found = module("lightmaps_cli").objects(scene, args, lambda m: FarmError(f"hemishadow farm: error: {m}"))
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        prepared = lightmaps.prepare(scene, found, uv_name=args.uv or lightmaps.DEFAULT_UV,
+        prepared = lightmaps.prepare(scene, found, uv_name=args.uv or args.islands,
                                      layout="ATLAS" if _atlas(args, found) else "OBJECT", atlas_name=args.atlas,
                                      resolution=args.resolution, texel_density=args.texel_density, basis=args.basis,
                                      bounces=args.bounces, samples=args.samples, margin=args.margin)
