@@ -19,7 +19,8 @@ import reference as ref
 
 hemishadow = pytest.importorskip("hemishadow")
 from hemishadow import panorama as pano  # noqa: E402
-from hemishadow.panorama import compact, png  # noqa: E402
+from hemishadow import png  # noqa: E402
+from hemishadow.panorama import compact  # noqa: E402
 
 W, H, K = 61, 32, 16  # a width that is not a multiple of 8: the SIMD blocks' tail
 
@@ -255,3 +256,19 @@ def test_open_floor_radiance_follows_blenders_lamp_conventions():
     cosine = np.einsum("k,nk->n", up, ref.sh_basis_reference(v / d[:, None], 5))
     expect = albedo[None] * (500.0 / (4 * np.pi * d ** 2) * cosine)[:, None]
     assert np.abs(got / expect - 1).max() < 0.01
+
+
+def test_png_round_trips_grey_rgb_and_rgba_bit_for_bit(tmp_path):
+    """hemishadow.png (the compact maps' and the lightmaps' 8-bit files): every layout back
+    as written, including the Up filter's wrap-around, and the lightmaps' RGBA writer."""
+    import hemishadow.lightmap.encode as encode
+
+    rng = np.random.default_rng(3)
+    for shape in ((7, 5), (6, 9, 3), (4, 3, 4)):
+        image = rng.integers(0, 256, shape, dtype=np.uint8)
+        assert np.array_equal(png.decode(png.encode(image)), image), shape
+    with pytest.raises(ValueError, match="uint8"):
+        png.encode(np.zeros((2, 2, 2), np.uint8))
+    rgba = rng.integers(0, 256, (5, 8, 4), dtype=np.uint8)
+    encode.write_png(tmp_path / "m.png", rgba)
+    assert np.array_equal(png.decode((tmp_path / "m.png").read_bytes()), rgba)

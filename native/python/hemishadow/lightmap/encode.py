@@ -11,11 +11,11 @@ luminance 2^-63.5 .. 2^64 with about 0.3 % steps.
 """
 
 import os
-import struct
 import tempfile
-import zlib
 
 import numpy as np
+
+from .. import png
 
 LOGLUV_M = np.array([[0.2209, 0.3390, 0.4184], [0.1138, 0.6780, 0.7319], [0.0102, 0.1130, 0.2969]])
 LOGLUV_M_INV = np.linalg.inv(LOGLUV_M)
@@ -63,21 +63,14 @@ def write_png(path, rgba):
     rgba = np.ascontiguousarray(rgba, dtype=np.uint8)
     if rgba.ndim != 3 or rgba.shape[2] != 4:
         raise ValueError(f"write_png: expected (H, W, 4) uint8, got {rgba.shape}")
-    h, w = rgba.shape[:2]
-    raw = np.concatenate([np.zeros((h, 1), np.uint8), rgba.reshape(h, -1)], axis=1).tobytes()  # filter 0
-
-    def chunk(kind, data):
-        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF)
-
-    png = (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 6, 0, 0, 0))
-           + chunk(b"IDAT", zlib.compress(raw, 6)) + chunk(b"IEND", b""))
+    data = png.encode(rgba)
     path = os.fspath(path)
     folder = os.path.dirname(os.path.abspath(path))
     os.makedirs(folder, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=folder, prefix=".tmp-", suffix=".png")
     try:
         with os.fdopen(fd, "wb") as f:
-            f.write(png)
+            f.write(data)
         os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):

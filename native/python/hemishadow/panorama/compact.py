@@ -16,7 +16,7 @@ import tempfile
 
 import numpy as np
 
-from . import png
+from .. import png
 
 FORMAT = "hemishadow-panorama"
 

@@ -6,7 +6,7 @@ import os
 
 import numpy as np
 
-from . import png
+from .. import png
 
 
 def srgb(linear):

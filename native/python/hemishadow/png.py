@@ -1,5 +1,7 @@
-"""8-bit PNG files without dependencies (Blender's Python has no Pillow): RGB or grey,
-linear data as stored (no gAMA, sRGB or iCCP chunk); read back only filter types 0-2."""
+"""8-bit PNG files without dependencies (Blender's Python has no Pillow, and the extension
+ships no image library): grey, RGB or RGBA, data as stored (no gAMA, sRGB or iCCP chunk);
+read back only filter types 0-2. Used by the panoramas' compact maps and pictures and by the
+lightmaps' 8-bit encodings."""
 
 import struct
 import zlib
@@ -7,18 +9,19 @@ import zlib
 import numpy as np
 
 _SIGNATURE = b"\x89PNG\r\n\x1a\n"
+_KINDS = {3: 2, 4: 6}  # channels -> PNG colour type (grey is 0)
 
 
 def encode(image):
-    """(H, W) or (H, W, 3) uint8 -> PNG bytes (rows top to bottom, filter Up: smooth maps
-    compress better)."""
+    """(H, W), (H, W, 3) or (H, W, 4) uint8 -> PNG bytes (rows top to bottom, filter Up:
+    smooth maps compress better)."""
     a = np.ascontiguousarray(image, dtype=np.uint8)
     if a.ndim == 2:
         a, kind = a[..., None], 0
-    elif a.ndim == 3 and a.shape[2] == 3:
-        kind = 2
+    elif a.ndim == 3 and a.shape[2] in _KINDS:
+        kind = _KINDS[a.shape[2]]
     else:
-        raise ValueError(f"PNG: expected (H, W) or (H, W, 3) uint8, got {a.shape}")
+        raise ValueError(f"PNG: expected (H, W), (H, W, 3) or (H, W, 4) uint8, got {a.shape}")
     h, w = a.shape[:2]
     rows = a.reshape(h, -1)
     up = rows.copy()
@@ -33,7 +36,7 @@ def encode(image):
 
 
 def decode(data, name="PNG"):
-    """PNG bytes written by `encode` (or any 8-bit grey/RGB, non-interlaced, filters 0-2)."""
+    """PNG bytes written by `encode` (or any 8-bit grey/RGB/RGBA, non-interlaced, filters 0-2)."""
     if data[:8] != _SIGNATURE:
         raise ValueError(f"{name}: not a PNG file")
     pos, idat, header = 8, [], None
@@ -48,9 +51,9 @@ def decode(data, name="PNG"):
     if header is None:
         raise ValueError(f"{name}: no IHDR chunk")
     w, h, depth, kind, _, _, interlace = header
-    channels = {0: 1, 2: 3}.get(kind)
+    channels = {0: 1, 2: 3, 6: 4}.get(kind)
     if depth != 8 or channels is None or interlace:
-        raise ValueError(f"{name}: only 8-bit grey or RGB PNGs without interlacing are read")
+        raise ValueError(f"{name}: only 8-bit grey, RGB or RGBA PNGs without interlacing are read")
     raw = np.frombuffer(zlib.decompress(b"".join(idat)), np.uint8).reshape(h, 1 + w * channels)
     filters, rows = raw[:, 0], raw[:, 1:].copy()
     if (filters > 2).any():
@@ -67,4 +70,4 @@ def decode(data, name="PNG"):
 
 
 def _shaped(rows, h, w, channels):
-    return rows.reshape(h, w) if channels == 1 else rows.reshape(h, w, 3)
+    return rows.reshape(h, w) if channels == 1 else rows.reshape(h, w, channels)
