@@ -8,6 +8,7 @@ import pytest
 bpy = pytest.importorskip("bpy")
 import hemishadow  # noqa: E402
 from layers import attribute  # noqa: E402
+import probe_scenes  # noqa: E402
 
 
 @pytest.fixture
@@ -15,28 +16,8 @@ def yard(addon):
     """A floor, a wall at x = 2 and a low sun from +x (its shadow reaches 3.5 m west of the
     wall), a probe volume over both, and a ball with Probe Lighting walking from the sun
     (frame 1, x = -3.5) into the shade (frame 3, x = 1.2)."""
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    addon.world.clear_cache()
-    addon.engine_bridge.forget()
-    scene = bpy.context.scene
-    scene.world = bpy.data.worlds.new("World")
-    scene.world.use_nodes = True
-    scene.world.node_tree.nodes["Background"].inputs["Strength"].default_value = 0.3
-    bpy.ops.mesh.primitive_plane_add(size=12.0)
-    bpy.ops.mesh.primitive_cube_add(size=1.0, location=(2.0, 0.0, 1.0))
-    bpy.context.active_object.scale = (0.2, 6.0, 2.0)
-    bpy.ops.object.light_add(type="SUN", rotation=(0.0, np.radians(60.0), 0.0))
-    bpy.context.active_object.name = "Sun"
-    bpy.context.active_object.data.energy = 3.0
-    bpy.ops.object.add(type="LIGHT_PROBE")
-    volume = bpy.context.active_object
-    if volume.data.type != "VOLUME":
-        volume.data = bpy.data.lightprobes.new("Volume", "VOLUME")
-    volume.name = "Volume"
-    volume.location, volume.scale = (-1.0, 0.0, 1.0), (3.5, 2.0, 1.0)
-    volume.data.resolution_x, volume.data.resolution_y, volume.data.resolution_z = 6, 2, 2
-    bpy.context.view_layer.update()
-    addon.probes.bake_probes(scene, volume, bounces=0)
+    scene = probe_scenes.yard(addon)
+    volume = scene.objects["Volume"]
     bpy.ops.mesh.primitive_uv_sphere_add(segments=16, ring_count=8, radius=0.3, location=(-3.5, 0.0, 0.6))
     ball = bpy.context.active_object
     ball.name = "Ball"
