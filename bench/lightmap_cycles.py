@@ -83,6 +83,18 @@ def _lamp(kind, corner):
         setattr(bpy.context.active_object.data, key, value)
 
 
+def subdivide(objects, cuts):
+    """Every face of each object cut `cuts` times (Edit Mode's Subdivide)."""
+    for obj in objects:
+        bpy.ops.object.select_all(action="DESELECT")
+        obj.select_set(True)
+        bpy.context.view_layer.objects.active = obj
+        bpy.ops.object.mode_set(mode="EDIT")
+        bpy.ops.mesh.select_all(action="SELECT")
+        bpy.ops.mesh.subdivide(number_cuts=cuts)
+        bpy.ops.object.mode_set(mode="OBJECT")
+
+
 def build(sun, cuts=0, basis_vector=None, scene_name="floor", lamp="none", sky=1.0):
     bpy.ops.wm.read_factory_settings(use_empty=True)
     world.clear_cache()
@@ -111,14 +123,7 @@ def build(sun, cuts=0, basis_vector=None, scene_name="floor", lamp="none", sky=1
     if lamp != "none":
         _lamp(lamp, scene_name == "corner")
     if cuts:  # bounce light is carried per vertex: finer meshes carry it better
-        for obj in [floor] + others:
-            bpy.ops.object.select_all(action="DESELECT")
-            obj.select_set(True)
-            bpy.context.view_layer.objects.active = obj
-            bpy.ops.object.mode_set(mode="EDIT")
-            bpy.ops.mesh.select_all(action="SELECT")
-            bpy.ops.mesh.subdivide(number_cuts=cuts)
-            bpy.ops.object.mode_set(mode="OBJECT")
+        subdivide([floor] + others, cuts)
     if sun:
         rotation = (0, math.radians(55), math.radians(10)) if scene_name == "room" else (math.radians(40), 0, math.radians(30))
         bpy.ops.object.light_add(type="SUN", rotation=rotation)

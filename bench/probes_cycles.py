@@ -38,6 +38,7 @@ import numpy as np
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 from addon import probes, world  # noqa: E402
+from lightmap_cycles import subdivide  # noqa: E402  (this folder)
 import hemishadow.probes as hp  # noqa: E402
 from hemishadow.environment import read_exr  # noqa: E402
 from hemishadow.probes import capture  # noqa: E402
@@ -74,13 +75,7 @@ def build(albedo, cuts=8, lamp="sun"):
     objects[-1].scale = (0.2, 3.0, 2.0)
     for obj in objects:
         obj.data.materials.append(material)
-        bpy.ops.object.select_all(action="DESELECT")
-        obj.select_set(True)
-        bpy.context.view_layer.objects.active = obj
-        bpy.ops.object.mode_set(mode="EDIT")
-        bpy.ops.mesh.select_all(action="SELECT")
-        bpy.ops.mesh.subdivide(number_cuts=cuts)
-        bpy.ops.object.mode_set(mode="OBJECT")
+    subdivide(objects, cuts)
     if lamp == "sun":
         bpy.ops.object.light_add(type="SUN", rotation=(math.radians(40), 0, math.radians(30)))
         bpy.context.active_object.data.energy = 3.0

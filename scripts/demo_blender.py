@@ -49,13 +49,23 @@ ZIP = ROOT / "dist" / "hemishadow-0.1.0-linux_x64.zip"
 MODULE = "bl_ext.user_default.hemishadow"   # the add-on's package once installed in user_default
 
 
-def parse_args(argv=None):
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+def demo_parser(doc, out_name, out_help="output folder"):
+    """The options every demo shares: the zip to install, the output folder (out/`out_name`),
+    Blender's user folder for the run, and --source."""
+    parser = argparse.ArgumentParser(description=doc.split("\n\n")[0])
     parser.add_argument("zip", nargs="?", default=str(ZIP),
                         help=f"the extension zip to install (default {ZIP.relative_to(ROOT)})")
-    parser.add_argument("--out", default=str(ROOT / "out" / "demo"), help="output folder (PNG frames, demo.blend)")
+    parser.add_argument("--out", default=str(ROOT / "out" / out_name), help=out_help)
     parser.add_argument("--user-resources", default=str(ROOT / "out" / "blender_user"),
                         help="Blender's user folder for this run, deleted and recreated (default out/blender_user)")
+    parser.add_argument("--source", action="store_true",
+                        help="register the add-on of this checkout with the environment's engine instead of "
+                             "installing the zip (to measure changes before they are packaged)")
+    return parser
+
+
+def parse_args(argv=None):
+    parser = demo_parser(__doc__, "demo", "output folder (PNG frames, demo.blend)")
     parser.add_argument("--frames", type=int, default=40, help="frames to simulate and shade (default 40)")
     parser.add_argument("--render", type=int, nargs="*", default=None,
                         help="frames to render (default: 4 spread over the range)")
@@ -66,9 +76,6 @@ def parse_args(argv=None):
     parser.add_argument("--hdri", default="forest", help="one of Blender's built-in HDRIs (default forest)")
     parser.add_argument("--no-casters", action="store_true",
                         help="self-shadowing only: no 'Shadow casters' collection (to compare the per-frame times)")
-    parser.add_argument("--source", action="store_true",
-                        help="register the add-on of this checkout with the environment's engine instead of "
-                             "installing the zip (to measure changes before they are packaged)")
     return parser.parse_args(argv)
 
 

@@ -17,7 +17,6 @@ Steps, all through the add-on's operators, as a user would click them:
    and out/demo_lightmaps/side_by_side.png (both), and saves demo_lightmaps.blend.
 """
 
-import argparse
 import math
 import pathlib
 import sys
@@ -31,18 +30,12 @@ import demo_blender  # noqa: E402  (installing the zip, render settings)
 
 
 def parse_args(argv=None):
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("zip", nargs="?", default=str(demo_blender.ZIP), help="the extension zip to install")
-    parser.add_argument("--out", default=str(ROOT / "out" / "demo_lightmaps"), help="output folder")
-    parser.add_argument("--user-resources", default=str(ROOT / "out" / "blender_user"),
-                        help="Blender's user folder for this run, deleted and recreated (default out/blender_user)")
+    parser = demo_blender.demo_parser(__doc__, "demo_lightmaps")
     parser.add_argument("--hdri", default="forest", help="one of Blender's built-in HDRIs (default forest)")
     parser.add_argument("--density", type=float, default=20.0, help="lightmap texels per metre (default 20)")
     parser.add_argument("--bounces", type=int, default=2, help="diffuse bounces (default 2)")
     parser.add_argument("--resolution", type=int, nargs=2, default=(480, 360), metavar=("X", "Y"))
     parser.add_argument("--samples", type=int, default=32, help="Cycles samples of the reference (default 32)")
-    parser.add_argument("--source", action="store_true",
-                        help="register this checkout's add-on instead of installing the zip")
     return parser.parse_args(argv)
 
 

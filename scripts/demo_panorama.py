@@ -15,7 +15,6 @@ Steps, through the add-on's operators as a user would click them:
    out/demo_panorama/vs_cycles_<light>.png shows ours above, Cycles below.
 """
 
-import argparse
 import pathlib
 import shutil
 import sys
@@ -35,17 +34,10 @@ LIGHTS = {  # name: (panel light setting, what Cycles gets)
 
 
 def parse_args(argv=None):
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("zip", nargs="?", default=str(demo_blender.ZIP), help="the extension zip to install")
-    parser.add_argument("--out", default=str(ROOT / "out" / "demo_panorama"), help="output folder")
-    parser.add_argument("--user-resources", default=str(ROOT / "out" / "blender_user"),
-                        help="Blender's user folder for this run, deleted and recreated")
+    parser = demo_blender.demo_parser(__doc__, "demo_panorama")
     parser.add_argument("--size", type=int, nargs=2, default=(512, 256), metavar=("W", "H"))
     parser.add_argument("--samples", type=int, default=64, help="Cycles samples (default 64)")
     parser.add_argument("--no-render", action="store_true", help="no Cycles renders (a quick check)")
-    parser.add_argument("--source", action="store_true",
-                        help="register the add-on of this checkout with the environment's engine instead of "
-                             "installing the zip")
     return parser.parse_args(argv)
 
 

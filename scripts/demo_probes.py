@@ -15,7 +15,6 @@ Steps, through the add-on's operators as a user would click them:
    out/demo_probes/side_by_side.png; prints the character's mean radiance in both.
 """
 
-import argparse
 import math
 import pathlib
 import sys
@@ -33,19 +32,12 @@ SUN, SHADE = (1, 24)  # frames: in the sun at the front, in the back wall's shad
 
 
 def parse_args(argv=None):
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("zip", nargs="?", default=str(demo_blender.ZIP), help="the extension zip to install")
-    parser.add_argument("--out", default=str(ROOT / "out" / "demo_probes"), help="output folder")
-    parser.add_argument("--user-resources", default=str(ROOT / "out" / "blender_user"),
-                        help="Blender's user folder for this run, deleted and recreated")
+    parser = demo_blender.demo_parser(__doc__, "demo_probes")
     parser.add_argument("--hdri", default="forest", help="one of Blender's built-in HDRIs (default forest)")
     parser.add_argument("--bounces", type=int, default=2, help="diffuse bounces of the probes (default 2)")
     parser.add_argument("--resolution", type=int, nargs=2, default=(480, 360), metavar=("X", "Y"))
     parser.add_argument("--samples", type=int, default=16, help="Cycles samples (default 16)")
     parser.add_argument("--no-render", action="store_true", help="render nothing (a quick check)")
-    parser.add_argument("--source", action="store_true",
-                        help="register the add-on of this checkout with the environment's engine instead of "
-                             "installing the zip")
     return parser.parse_args(argv)
 
 
