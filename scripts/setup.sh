@@ -111,7 +111,8 @@ install_requirements() {  # install_requirements DIR FILE
     fi
     say "installing $file into ${dir#"$ROOT"/}"
     "$dir/bin/python" -m pip install -q --disable-pip-version-check --upgrade pip
-    "$dir/bin/python" -m pip install -q --disable-pip-version-check -r "$file"
+    # No wheel cache: four bpy wheels would cost ~1.5 GB of disk for nothing on a CI machine.
+    "$dir/bin/python" -m pip install -q --disable-pip-version-check --no-cache-dir -r "$file"
     echo "$want" >"$stamp"
 }
 
