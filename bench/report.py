@@ -33,7 +33,7 @@ TITLES = {
     "rigged_figure": "rigged_figure.glb",
 }
 MARKERS = {"default": "o", "downsample 1": "<", "downsample 2": "^", "downsample 4": ">", "table 64": "s",
-           "table 96": "D", "table 128": "p", "ring 1": "v", "ring 2": "h", "PVS": "*", "PVS, half the poses": "X"}
+           "table 96": "D", "table 128": "p", "ring 1": "v", "ring 2": "h", "two levels (far_lod 0)": "d", "far_lod 0.7": "P", "PVS": "*", "PVS, half the poses": "X"}
 # issue 9's targets: (mesh, speed-up at equal error, frames per second)
 TARGETS = {"suzanne_8k": (10.0, 40.0), "cloth": (20.0, 300.0)}
 TARGET_RATIO = 4.5

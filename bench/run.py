@@ -45,6 +45,8 @@ VARIANTS = [
     ("table 128", dict(table_resolution=128)),
     ("ring 1", dict(ring=1)),
     ("ring 2", dict(ring=2)),
+    ("two levels (far_lod 0)", dict(far_lod=0.0)),
+    ("far_lod 0.7", dict(far_lod=0.7)),
     ("PVS", {}),  # the default + build_pvs(the mesh's frames), when the engine has it
     ("PVS, half the poses", {}),  # build_pvs(frames 0, 2, 4, ...): the odd frames are unseen poses
 ]

@@ -48,10 +48,13 @@ def test_hierarchy_stays_close_to_the_exact_path(name):
     assert solver.stats["blockers_per_vertex"] < 0.25 * len(t)
 
 
-def test_reuse_returns_what_a_fresh_solve_returns(spot):
+@pytest.mark.parametrize("far_lod", [hemishadow.TransferSolver.__init__.__kwdefaults__["far_lod"], 0.0, 0.9])
+def test_reuse_returns_what_a_fresh_solve_returns(spot, far_lod):
+    """Also with the group tree drawing most groups through proxies (0.9): a receiver is
+    reused only when its walk down the tree is the same in both frames."""
     v, t = spot
-    reusing = hemishadow.TransferSolver(v, t)
-    fresh = hemishadow.TransferSolver(v, t, reuse=False)
+    reusing = hemishadow.TransferSolver(v, t, far_lod=far_lod)
+    fresh = hemishadow.TransferSolver(v, t, reuse=False, far_lod=far_lod)
     first = reusing.solve(v)
     again = reusing.solve(v)
     assert reusing.stats["reused"] == len(np.unique(v, axis=0)) and np.array_equal(first, again)
@@ -63,6 +66,30 @@ def test_reuse_returns_what_a_fresh_solve_returns(spot):
     got = reusing.solve(moved)
     assert 0 < reusing.stats["reused"] < len(v)
     assert np.array_equal(got, fresh.solve(moved))
+
+
+def terrain(n=90):
+    """Rolling hills on an n x n grid: every receiver sees distant slopes above its horizon."""
+    x, y = np.meshgrid(np.linspace(-1, 1, n), np.linspace(-1, 1, n))
+    z = 0.15 * np.sin(4 * x) * np.cos(3 * y) + 0.1 * x * x
+    v = np.stack([x, y, z], axis=-1).reshape(-1, 3).astype(np.float32)
+    i = np.arange(n * n).reshape(n, n)
+    a, b, c, d = i[:-1, :-1].ravel(), i[:-1, 1:].ravel(), i[1:, :-1].ravel(), i[1:, 1:].ravel()
+    return v, np.concatenate([np.stack([a, b, d], 1), np.stack([a, d, c], 1)]).astype(np.uint32)
+
+
+def test_group_tree_draws_distant_groups_coarser():
+    """The third level: distant groups through proxies cost fewer blockers for a small error."""
+    v, t = terrain()
+    exact = hemishadow.TransferSolver(v, t, hierarchy=False, reuse=False).solve(v)
+    two_levels = hemishadow.TransferSolver(v, t, far_lod=0, reuse=False)
+    three = hemishadow.TransferSolver(v, t, far_lod=0.9, reuse=False)
+    base, coarser = two_levels.solve(v), three.solve(v)
+    assert three.stats["blockers_per_vertex"] < 0.8 * two_levels.stats["blockers_per_vertex"]
+    lit = exact[:, 0] / hemishadow.AO_UNOCCLUDED >= 0.1
+    for got in (base, coarser):
+        errors = relative_l2_errors(got, exact)
+        assert np.median(errors) <= 0.02 and errors[lit].mean() <= 0.05
 
 
 def test_glossy_solver_matches_transfer_on_the_exact_path(spot):

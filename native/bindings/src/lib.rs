@@ -189,7 +189,7 @@ fn view_argument(view: Option<PyReadonlyArray1<f32>>, views: Option<PyReadonlyAr
 #[pymethods]
 impl PySolver {
     #[new]
-    #[pyo3(signature = (rest, triangles, bands, exponent, offset, table_resolution, downsample, hierarchy, coarse_triangles, ring, cull, reuse, near_scale))]
+    #[pyo3(signature = (rest, triangles, bands, exponent, offset, table_resolution, downsample, hierarchy, coarse_triangles, ring, cull, reuse, near_scale, far_lod))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -206,12 +206,13 @@ impl PySolver {
         cull: bool,
         reuse: bool,
         near_scale: f32,
+        far_lod: f32,
     ) -> PyResult<Self> {
         let rest = rows3(&rest, "rest_vertices")?;
         let triangles = triangles3(&triangles)?;
         let brdf = exponent.map_or(engine::Brdf::Diffuse, |exponent| engine::Brdf::Phong { exponent });
         let settings = engine::Settings { bands, brdf, view: None, offset, table_resolution, downsample };
-        let blockers = engine::Blockers { hierarchy, coarse_triangles, ring, cull, reuse, near_scale };
+        let blockers = engine::Blockers { hierarchy, coarse_triangles, ring, cull, reuse, near_scale, far_lod };
         let inner = run(py, || engine::Solver::new(&rest, &triangles, &settings, blockers))?;
         Ok(PySolver { inner: Box::new(inner) })
     }
@@ -401,6 +402,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<panorama::PyRelighter>()?;
     m.add("Cancelled", m.py().get_type::<Cancelled>())?;
     m.add("DEFAULT_TABLE_RESOLUTION", engine::plane_table::DEFAULT_RESOLUTION)?;
+    m.add("DEFAULT_FAR_LOD", engine::group_tree::FAR_LOD)?;
     m.add("MASK_SIDE", engine::disk_mask::MASK_SIDE)?;
     Ok(())
 }

@@ -17,6 +17,7 @@ use rayon::prelude::*;
 
 use crate::disk_mask::{cell_direction, Mask, MASK_SIDE};
 use crate::error::{Error, Result};
+use crate::large_pages::LargePageVec;
 
 /// The paper's 6 x 128 x 128 texels (12 MiB). 64 (3 MiB, stays in cache) measured 1.06-1.7x
 /// faster for +0.03 to +0.33 percentage points of median error (docs/benchmarks.md), but its
@@ -26,7 +27,7 @@ pub const DEFAULT_RESOLUTION: usize = 128;
 
 pub struct PlaneTable {
     resolution: usize,
-    masks: Vec<Mask>,
+    masks: LargePageVec<Mask>,
 }
 
 /// Cube-map face and texel of a direction; the major axis picks the face.
@@ -84,14 +85,12 @@ impl PlaneTable {
             .flat_map(|row| (0..MASK_SIDE).map(move |col| (row, col)))
             .filter_map(|(row, col)| cell_direction(row, col).map(|d| (row, col, d)))
             .collect();
-        let masks = (0..6 * resolution * resolution)
-            .into_par_iter()
-            .map(|index| {
-                let (face, rest) = (index / (resolution * resolution), index % (resolution * resolution));
-                let (j, i) = (rest / resolution, rest % resolution);
-                half_space_mask(texel_direction(face, i, j, resolution), &cells)
-            })
-            .collect();
+        let mut masks = LargePageVec::filled(Mask::EMPTY, 6 * resolution * resolution);
+        masks.par_iter_mut().enumerate().for_each(|(index, mask)| {
+            let (face, rest) = (index / (resolution * resolution), index % (resolution * resolution));
+            let (j, i) = (rest / resolution, rest % resolution);
+            *mask = half_space_mask(texel_direction(face, i, j, resolution), &cells);
+        });
         Ok(PlaneTable { resolution, masks })
     }
 

@@ -13,7 +13,8 @@ use rayon::prelude::*;
 
 use crate::disk_mask::{disk, Mask};
 use crate::error::{Error, Result};
-use crate::hierarchy::{default_coarse_triangles, Hierarchy, GROUP};
+use crate::group_tree::{GroupTree, FAR_LOD, LEAF};
+use crate::hierarchy::{default_coarse_triangles, morton_permutation, Hierarchy, GROUP};
 use crate::integrate::{Brdf, Quadrature};
 use crate::mesh::{box_of, check_finite, weld, welded_normals, Normalization, Vec3};
 use crate::progress::{par_rows, Progress};
@@ -44,11 +45,15 @@ pub struct Blockers {
     /// keeps every vertex of the shared meshes and characters, in every frame, within 0.1 AO
     /// of the exact path (bench/solver_trust.py); 1.5 left receivers inside folds 0.13 off.
     pub near_scale: f32,
+    /// Groups of coarse triangles whose bounds' radius is below this fraction of their
+    /// distance are drawn through a coarser proxy (`group_tree.rs`); 0 draws every coarse
+    /// triangle, as the paper's two levels do.
+    pub far_lod: f32,
 }
 
 impl Default for Blockers {
     fn default() -> Self {
-        Blockers { hierarchy: true, coarse_triangles: None, ring: 2, cull: true, reuse: true, near_scale: 2.5 }
+        Blockers { hierarchy: true, coarse_triangles: None, ring: 2, cull: true, reuse: true, near_scale: 2.5, far_lod: FAR_LOD }
     }
 }
 
@@ -68,7 +73,7 @@ struct LastFrame {
     positions: Vec<Vec3>,
     normals: Vec<Vec3>,
     views: Option<Vec<Vec3>>,
-    group_bounds: Vec<[Vec3; 2]>,
+    node_bounds: Vec<[Vec3; 2]>,
     used_pvs: bool,
     casters: Option<CasterCache>,
     transfer: Vec<f32>,
@@ -85,6 +90,12 @@ pub struct Solver {
     coarse_packets: PacketLists,
     /// Per cluster, the fine triangles it owns.
     fine_packets: PacketLists,
+    /// The groups' tree, with proxies for distant ones.
+    group_tree: GroupTree,
+    /// Welded receivers in the order they are computed: along a Morton curve of the rest
+    /// pose, so that a thread's consecutive receivers read the same clusters from cache
+    /// (Blender's subdivided meshes number vertices far apart from their neighbours).
+    receiver_order: Vec<u32>,
     blockers: Blockers,
     brdf: Brdf,
     offset: f32,
@@ -106,6 +117,8 @@ struct Frame {
     /// Per cluster, the centre of its box and (near_scale x half its diagonal)^2.
     spheres: Vec<[f32; 4]>,
     group_bounds: Vec<[Vec3; 2]>,
+    /// Per node of the group tree, its box.
+    node_bounds: Vec<[Vec3; 2]>,
     /// Whether receivers see through their potentially visible sets.
     use_pvs: bool,
 }
@@ -129,6 +142,8 @@ impl Solver {
         let first_copy = mesh.first_copies();
         let coarse_packets = PacketLists::new(hierarchy.coarse.chunks(GROUP));
         let fine_packets = PacketLists::new(hierarchy.cluster_compact.iter().map(|c| &c.welded[..]));
+        let group_tree = GroupTree::build(&layout, &hierarchy);
+        let receiver_order = morton_permutation(&layout);
         Ok(Solver {
             remap: mesh.remap,
             first_copy,
@@ -137,6 +152,8 @@ impl Solver {
             hierarchy,
             coarse_packets,
             fine_packets,
+            group_tree,
+            receiver_order,
             blockers,
             brdf: settings.brdf,
             offset,
@@ -172,11 +189,11 @@ impl Solver {
         let compact = |c: &crate::hierarchy::Compact| c.vertices.len() * 4 + c.welded.len() * 12;
         let last = self.last.as_ref().map_or(0, |l| {
             (l.positions.len() + l.normals.len() + l.views.as_ref().map_or(0, Vec::len)) * size_of::<Vec3>()
-                + l.group_bounds.len() * 24
+                + l.node_bounds.len() * 24
                 + l.transfer.len() * 4
                 + l.casters.as_ref().map_or(0, CasterCache::bytes)
         });
-        (self.remap.len() + self.first_copy.len()) * 4
+        (self.remap.len() + self.first_copy.len() + self.receiver_order.len()) * 4
             + self.fine.len() * 12
             + h.coarse.len() * 12
             + (h.owned_start.len() + h.owned.len() + h.near_start.len() + h.near.len()) * 4
@@ -184,6 +201,8 @@ impl Solver {
             + h.cluster_compact.iter().map(compact).sum::<usize>()
             + self.coarse_packets.bytes()
             + self.fine_packets.bytes()
+            + self.group_tree.proxies.bytes()
+            + self.group_tree.nodes.len() * std::mem::size_of::<crate::group_tree::GroupNode>()
             + self.pvs.as_ref().map_or(0, Pvs::bytes)
             + last
     }
@@ -223,9 +242,10 @@ impl Solver {
         let keep_masks = casters.is_some() && self.blockers.reuse;
         let masks: Vec<Mutex<Kept>> = (0..if keep_masks { frame.positions.len() } else { 0 }).map(|_| Mutex::default()).collect();
         let k = self.coeffs();
-        let mut welded = vec![0.0f32; frame.positions.len() * k];
+        let mut ordered = vec![0.0f32; frame.positions.len() * k];
         let (blockers, reused) = (AtomicU64::new(0), AtomicU64::new(0));
-        par_rows(&mut welded, k, progress, Vec::new, |r, scratch, out| {
+        par_rows(&mut ordered, k, progress, Vec::new, |i, scratch, out| {
+            let r = self.receiver_order[i] as usize;
             let copy = still[r] && plan.as_ref().is_none_or(|p| p.unchanged);
             let step = match (&self.last, copy) {
                 (Some(last), true) => {
@@ -244,6 +264,10 @@ impl Solver {
                 *slot.lock().unwrap_or_else(|e| e.into_inner()) = base;
             }
         })?;
+        let mut welded = vec![0.0f32; ordered.len()];
+        for (row, &r) in ordered.chunks_exact(k).zip(&self.receiver_order) {
+            welded[r as usize * k..(r as usize + 1) * k].copy_from_slice(row);
+        }
         let reused = reused.into_inner() as usize;
         let computed = frame.positions.len() - reused;
         self.stats = Stats {
@@ -256,8 +280,8 @@ impl Solver {
         if self.blockers.reuse {
             let masks = masks.into_iter().map(|m| m.into_inner().unwrap_or_else(|e| e.into_inner())).collect();
             let casters = casters.zip(plan).map(|(c, p)| p.into_cache(c, masks));
-            let Frame { positions, normals, views, group_bounds, use_pvs, .. } = frame;
-            self.last = Some(LastFrame { positions, normals, views, group_bounds, used_pvs: use_pvs, casters, transfer: welded });
+            let Frame { positions, normals, views, node_bounds, use_pvs, .. } = frame;
+            self.last = Some(LastFrame { positions, normals, views, node_bounds, used_pvs: use_pvs, casters, transfer: welded });
         }
         Ok(result)
     }
@@ -277,11 +301,13 @@ impl Solver {
         let views = welded_views(&self.first_copy, self.remap.len(), self.brdf, view)?;
         self.coarse_packets.update(&positions);
         self.fine_packets.update(&positions);
+        self.group_tree.proxies.update(&positions);
         let bounds = self.cluster_bounds(&positions);
         let group_bounds = self.group_bounds(&positions, &bounds);
+        let node_bounds = self.group_tree.bounds(&group_bounds);
         let spheres = self.near_spheres(&bounds);
         let use_pvs = self.pvs.as_ref().is_some_and(|pvs| pvs.covers(&positions));
-        Ok(Frame { positions, normals, views, bounds, spheres, group_bounds, use_pvs })
+        Ok(Frame { positions, normals, views, bounds, spheres, group_bounds, node_bounds, use_pvs })
     }
 
     /// Samples `poses` (input vertices per pose) for potentially visible sets (`pvs.rs`):
@@ -370,8 +396,7 @@ impl Solver {
             return (1 << clusters) - 1;
         }
         let near = self.hierarchy.near_of(r);
-        let mut next = near.partition_point(|&c| (c as usize) < first);
-        take_bits(near, &mut next, first, clusters) | close_clusters(receiver, &frame.spheres[first..first + clusters])
+        bits_of(near, first, clusters) | close_clusters(receiver, &frame.spheres[first..first + clusters])
     }
 
     /// Per cluster, the bounding box of its coarse triangle and the fine triangles it owns in
@@ -411,8 +436,7 @@ impl Solver {
     }
 
     /// Receivers whose result cannot differ from the last frame's: same position, normal and
-    /// view, and every group of blockers that moved lies below its horizon in both frames
-    /// (so it contributed nothing then and contributes nothing now).
+    /// view, and the same walk down the group tree in both frames (`same_walk`).
     /// `casters`: whether this frame has casters; a last frame with (or without) them leaves
     /// nothing to reuse for a frame without (or with): the masks differ.
     fn reusable_receivers(&self, frame: &Frame, casters: bool) -> Vec<bool> {
@@ -430,7 +454,10 @@ impl Solver {
                     || clusters.flat_map(|c| h.cluster_compact[c].vertices.iter()).any(|&v| moved[v as usize])
             })
             .collect();
-        let moved_groups: Vec<usize> = (0..h.groups()).filter(|&g| group_moved[g]).collect();
+        let tree = &self.group_tree;
+        let node_moved: Vec<bool> = (0..tree.nodes.len())
+            .map(|n| tree.proxies.of(n).iter().flat_map(|p| p.ids.iter().flatten()).any(|&v| v != u32::MAX && moved[v as usize]))
+            .collect();
         (0..n)
             .into_par_iter()
             .map(|r| {
@@ -438,11 +465,43 @@ impl Solver {
                     return false;
                 }
                 let Some(receiver) = Receiver::new(frame.positions[r], frame.normals[r], self.offset) else { return true };
-                moved_groups
-                    .iter()
-                    .all(|&g| receiver.below_horizon(&frame.group_bounds[g]) && receiver.below_horizon(&last.group_bounds[g]))
+                self.same_walk(&receiver, frame, last, &group_moved, &node_moved)
             })
             .collect()
+    }
+
+    /// Whether the receiver's walk down the group tree takes the same turns in this frame as
+    /// in the last (every node it culls, draws through its proxy or opens) and meets nothing
+    /// that moved except below its horizon in both frames: then its blockers are the same.
+    fn same_walk(&self, receiver: &Receiver, frame: &Frame, last: &LastFrame, group_moved: &[bool], node_moved: &[bool]) -> bool {
+        let tree = &self.group_tree;
+        let lod2 = if frame.use_pvs || !self.blockers.hierarchy { 0.0 } else { self.blockers.far_lod.powi(2) };
+        let far = |b: &[Vec3; 2]| {
+            let d2: f32 = (0..3).map(|a| (0.5 * (b[0][a] + b[1][a]) - receiver.origin[a]).powi(2)).sum();
+            let r2: f32 = (0..3).map(|a| (0.5 * (b[1][a] - b[0][a])).powi(2)).sum();
+            r2 < lod2 * d2
+        };
+        let mut stack = vec![0u32];
+        while let Some(n) = stack.pop() {
+            let n = n as usize;
+            let (now, then) = (&frame.node_bounds[n], &last.node_bounds[n]);
+            let node = tree.nodes[n];
+            if (receiver.below_horizon(now), receiver.below_horizon(then)) == (true, true) {
+                continue;
+            }
+            if node.children == LEAF {
+                if group_moved[node.first as usize] {
+                    return false;
+                }
+                continue;
+            }
+            match (far(now), far(then)) {
+                (true, true) if !node_moved[n] => {}
+                (false, false) => stack.extend_from_slice(&node.children),
+                _ => return false,
+            }
+        }
+        true
     }
 
     /// Transfer of welded receiver `r` into `out`: its own blockers and the still casters'
@@ -503,57 +562,87 @@ impl Solver {
         self.own_mask_portable(r, frame, receiver)
     }
 
-    /// Per group of clusters (skipped whole when below the horizon): the coarse triangles of
-    /// the clusters seen from afar, then the fine packets of the clusters seen at full
-    /// resolution (the receiver's ring and clusters close to it), each packet skipped when
-    /// its box is below the horizon.
+    /// Down the group tree (`group_tree.rs`), nodes below the horizon skipped and distant
+    /// ones drawn through their proxies; per group reached: the coarse triangles of the
+    /// clusters seen from afar, then the fine packets of the clusters seen at full resolution
+    /// (the receiver's ring and clusters close to it), each packet skipped when its box is
+    /// below the horizon.
     #[inline(always)]
     fn own_mask_portable(&self, r: usize, frame: &Frame, receiver: &Receiver) -> (Mask, u64) {
-        let (h, table, origin) = (&self.hierarchy, &*self.table, receiver.origin);
+        let (tree, table, origin) = (&self.group_tree, &*self.table, receiver.origin);
         let mut mask = Mask::EMPTY;
         let mut pipeline = Pipeline::default();
         let mut rasterized = 0u32;
-        let near = h.near_of(r);
-        let mut next_near = 0;
-        let visible = self.pvs.as_ref().filter(|_| frame.use_pvs).map(|pvs| pvs.of(r));
-        let mut next_visible = 0;
-        for g in 0..h.groups() {
-            let first = g * GROUP;
-            let clusters = (first + GROUP).min(h.clusters()) - first;
-            let mut expanded = take_bits(near, &mut next_near, first, clusters);
-            let seen = visible.map_or(u32::MAX, |v| take_bits(v, &mut next_visible, first, clusters));
-            if seen == 0 || (self.blockers.cull && receiver.below_horizon(&frame.group_bounds[g])) {
+        // The potentially visible sets are per cluster: with them, every group is opened.
+        let lod2 = if frame.use_pvs || !self.blockers.hierarchy { 0.0 } else { self.blockers.far_lod.powi(2) };
+        let mut stack: Vec<u32> = Vec::with_capacity(64);
+        if !tree.nodes.is_empty() {
+            stack.push(0);
+        }
+        while let Some(n) = stack.pop() {
+            let n = n as usize;
+            let node = tree.nodes[n];
+            if self.blockers.cull && receiver.below_horizon(&frame.node_bounds[n]) {
                 continue;
             }
-            if !self.blockers.hierarchy {
-                expanded = (1 << clusters) - 1;
+            if node.children == LEAF {
+                rasterized += self.group_blockers(node.first as usize, r, frame, receiver, &mut pipeline, &mut mask);
+                if mask == self.disk {
+                    break;
+                }
+                continue;
+            }
+            let [lo, hi] = frame.node_bounds[n];
+            let d2: f32 = (0..3).map(|a| (0.5 * (lo[a] + hi[a]) - origin[a]).powi(2)).sum();
+            let r2: f32 = (0..3).map(|a| (0.5 * (hi[a] - lo[a])).powi(2)).sum();
+            if r2 < lod2 * d2 {
+                for packet in tree.proxies.of(n) {
+                    rasterized += pipeline.rasterize_packet(table, origin, &receiver.frame, packet, u32::MAX, r as u32, &mut mask);
+                }
             } else {
-                expanded |= close_clusters(&receiver, &frame.spheres[first..first + clusters]);
-                for (p, packet) in self.coarse_packets.of(g).iter().enumerate() {
-                    let far = (!expanded & seen) >> (p * LANES);
-                    rasterized += pipeline.rasterize_packet(table, origin, &receiver.frame, packet, far, r as u32, &mut mask);
-                }
-            }
-            expanded &= seen;
-            let mut bits = expanded;
-            while bits != 0 {
-                let c = first + bits.trailing_zeros() as usize;
-                bits &= bits - 1;
-                if self.blockers.cull && receiver.below_horizon(&frame.bounds[c]) {
-                    continue;
-                }
-                for packet in self.fine_packets.of(c) {
-                    if !(self.blockers.cull && receiver.clearly_below_horizon(&packet.bounds)) {
-                        rasterized += pipeline.rasterize_packet(table, origin, &receiver.frame, packet, u32::MAX, r as u32, &mut mask);
-                    }
-                }
-            }
-            if mask == self.disk {
-                break;
+                stack.extend_from_slice(&[node.children[1], node.children[0]]); // in group order
             }
         }
         pipeline.drain(table, &mut mask);
         (mask, rasterized as u64)
+    }
+
+    /// Group `g`'s blockers for receiver `r`: see `own_mask_portable`.
+    #[inline(always)]
+    fn group_blockers(&self, g: usize, r: usize, frame: &Frame, receiver: &Receiver, pipeline: &mut Pipeline, mask: &mut Mask) -> u32 {
+        let (h, table, origin) = (&self.hierarchy, &*self.table, receiver.origin);
+        let first = g * GROUP;
+        let clusters = (first + GROUP).min(h.clusters()) - first;
+        let mut expanded = bits_of(h.near_of(r), first, clusters);
+        let seen = self.pvs.as_ref().filter(|_| frame.use_pvs).map_or(u32::MAX, |pvs| bits_of(pvs.of(r), first, clusters));
+        if seen == 0 || (self.blockers.cull && receiver.below_horizon(&frame.group_bounds[g])) {
+            return 0;
+        }
+        let mut rasterized = 0;
+        if !self.blockers.hierarchy {
+            expanded = (1 << clusters) - 1;
+        } else {
+            expanded |= close_clusters(receiver, &frame.spheres[first..first + clusters]);
+            for (p, packet) in self.coarse_packets.of(g).iter().enumerate() {
+                let far = (!expanded & seen) >> (p * LANES);
+                rasterized += pipeline.rasterize_packet(table, origin, &receiver.frame, packet, far, r as u32, mask);
+            }
+        }
+        expanded &= seen;
+        let mut bits = expanded;
+        while bits != 0 {
+            let c = first + bits.trailing_zeros() as usize;
+            bits &= bits - 1;
+            if self.blockers.cull && receiver.below_horizon(&frame.bounds[c]) {
+                continue;
+            }
+            for packet in self.fine_packets.of(c) {
+                if !(self.blockers.cull && receiver.clearly_below_horizon(&packet.bounds)) {
+                    rasterized += pipeline.rasterize_packet(table, origin, &receiver.frame, packet, u32::MAX, r as u32, mask);
+                }
+            }
+        }
+        rasterized
     }
 }
 
@@ -575,16 +664,11 @@ fn snapped(positions: &[Vec3], triangles: &[[u32; 3]]) -> Vec<Vec3> {
     positions.iter().zip(used).map(|(p, used)| if used { snap(p) } else { [0.0; 3] }).collect()
 }
 
-/// Bits (relative to `first`) of the entries of the ascending `list` below `first + count`,
-/// from `next` on; advances `next` past them.
+/// Bits (relative to `first`) of the entries of the ascending `list` in `first..first + count`.
 #[inline(always)]
-fn take_bits(list: &[u32], next: &mut usize, first: usize, count: usize) -> u32 {
-    let mut bits = 0;
-    while *next < list.len() && (list[*next] as usize) < first + count {
-        bits |= 1 << (list[*next] as usize - first);
-        *next += 1;
-    }
-    bits
+fn bits_of(list: &[u32], first: usize, count: usize) -> u32 {
+    let start = list.partition_point(|&c| (c as usize) < first);
+    list[start..].iter().take_while(|&&c| (c as usize) < first + count).fold(0, |bits, &c| bits | 1 << (c as usize - first))
 }
 
 /// Bit i set when cluster i's near sphere contains the receiver.

@@ -30,6 +30,10 @@ class TransferSolver:
     whatever the surface distance (a coarse triangle that close cuts through the real
     surface and would shadow falsely); 0 uses the ring only. The default, 2.5, keeps every
     vertex of the shared meshes and characters within 0.1 AO of the exact path.
+    far_lod: groups of coarse triangles whose bounds' radius is below far_lod x their
+    distance from a receiver are drawn through a coarser proxy (a third level, so that the
+    cost per receiver does not grow with the mesh); 0 draws every coarse triangle, as the
+    paper's two levels do.
     Positions are moved and scaled into a unit box internally (by the rest pose's centre and
     size), so results do not depend on the mesh's size or place.
     hierarchy=False makes every fine triangle a blocker (the exact path of `transfer`, with
@@ -38,11 +42,14 @@ class TransferSolver:
 
     def __init__(self, rest_vertices, triangles, *, bands=5, brdf="diffuse", exponent=None, offset=None,
                  downsample=None, table_resolution=_native.DEFAULT_TABLE_RESOLUTION, hierarchy=True,
-                 coarse_triangles=None, ring=2, near_scale=2.5, cull=True, reuse=True):
+                 coarse_triangles=None, ring=2, near_scale=2.5, far_lod=_native.DEFAULT_FAR_LOD, cull=True,
+                 reuse=True):
         rest, tris = _checks.mesh(rest_vertices, triangles, "rest_vertices")
         exponent = _checks.brdf_exponent(brdf, exponent)
         if not (np.isfinite(near_scale) and near_scale >= 0):
             raise ValueError(f"near_scale must be a finite, non-negative number, got {near_scale!r}")
+        if not (np.isfinite(far_lod) and 0 <= far_lod < 1):
+            raise ValueError(f"far_lod must be a number in [0, 1), got {far_lod!r}")
         if coarse_triangles is not None and (int(coarse_triangles) != coarse_triangles or coarse_triangles < 1):
             raise ValueError(f"coarse_triangles must be a positive integer, got {coarse_triangles!r}")
         self.bands = _checks.band_count(bands)
@@ -50,7 +57,8 @@ class TransferSolver:
         self._solver = _native.Solver(rest, tris, self.bands, exponent, _checks.offset(offset),
                                       int(table_resolution), None if downsample is None else int(downsample),
                                       bool(hierarchy), None if coarse_triangles is None else int(coarse_triangles),
-                                      int(ring), bool(cull), bool(reuse), float(near_scale))
+                                      int(ring), bool(cull), bool(reuse), float(near_scale),
+                                      float(far_lod))
 
     @property
     def vertex_count(self):
@@ -84,7 +92,9 @@ class TransferSolver:
         the rest pose's half size (its largest half-extent). Farther poses fall back to the
         full hierarchy (`stats['pvs']` says which was used). normals: (F, N, 3), the normals
         `solve` will be given for those poses (None: the mesh's own, as `solve` without
-        normals). Replaces earlier sets."""
+        normals). Replaces earlier sets. The sets are per cluster, so a frame that uses them
+        draws every group of coarse triangles as the paper's two levels do (far_lod 0): its
+        result equals that of a solver with far_lod=0."""
         poses = np.ascontiguousarray(poses, dtype=np.float32)
         if poses.ndim != 3 or poses.shape[1:] != (self.vertex_count, 3):
             raise ValueError(f"poses must have shape (F, {self.vertex_count}, 3), got {poses.shape}")

@@ -60,6 +60,7 @@ impl<'a> DepthSink<'a> {
 }
 
 impl Sink for DepthSink<'_> {
+    #[inline(always)]
     fn triangle(&mut self, a: Vec3, b: Vec3, c: Vec3, ids: [u32; 3], tag: Tag) {
         let Some(covered) = triangle_mask(self.table, a, b, c) else { return };
         self.triangles += 1;

@@ -1,0 +1,118 @@
+//! A third level above the paper's two (`hierarchy.rs`): a binary tree over the groups of
+//! coarse triangles, each inner node carrying a simplified proxy of the coarse triangles below
+//! it. A receiver draws a node through its proxy when the node subtends a small angle, so the
+//! distant part of a large mesh costs a few dozen triangles instead of every coarse triangle;
+//! the coarse mesh may then grow with the mesh, and clusters (the full-resolution patches
+//! around each receiver) keep their size. Without it the cost per receiver grew with the mesh:
+//! the 126k-vertex Suzanne took 5.9x the 32k one's time per frame for 4x the vertices.
+//!
+//! Groups are consecutive in Morton order, so a range of groups is a compact region; a node
+//! covers a range, its leaves are single groups. Proxies keep a subset of the coarse vertices
+//! (meshoptimizer's simplifier with locked borders, `scene::clusters::simplify`), so they
+//! deform with the mesh at no cost, as the coarse mesh does.
+
+use crate::hierarchy::{Hierarchy, GROUP};
+use crate::mesh::{Vec3, EMPTY_BOX};
+use crate::packets::PacketLists;
+use crate::scene::clusters::{simplify, union, PROXY_TRIANGLES};
+
+/// A node is drawn through its proxy when its bounding sphere's radius is below this fraction
+/// of its distance. Measured by bench/group_tree.py (docs/benchmarks_group_tree.md): against
+/// the exact path, the median error of transfer grows by a tenth to a fifth of a point at 0.5
+/// and twice that at 0.7, while the 126k-vertex Suzanne's frame takes a quarter less at 0.5.
+pub const FAR_LOD: f32 = 0.5;
+
+#[derive(Clone, Copy, Debug)]
+pub struct GroupNode {
+    /// The groups below it: `first..end`.
+    pub first: u32,
+    pub end: u32,
+    /// Children, or `LEAF` for a single group.
+    pub children: [u32; 2],
+}
+
+pub const LEAF: [u32; 2] = [u32::MAX; 2];
+
+pub struct GroupTree {
+    /// Node 0 is the root; parents come before their children.
+    pub nodes: Vec<GroupNode>,
+    /// Per node, its proxy's triangles (welded ids) in packets; empty for leaves.
+    pub proxies: PacketLists,
+}
+
+impl GroupTree {
+    pub fn build(positions: &[Vec3], hierarchy: &Hierarchy) -> GroupTree {
+        let mut nodes = Vec::new();
+        if hierarchy.groups() > 0 {
+            split(0, hierarchy.groups() as u32, &mut nodes);
+        }
+        let proxies: Vec<Vec<[u32; 3]>> = nodes
+            .iter()
+            .map(|n| {
+                if n.children == LEAF {
+                    return Vec::new();
+                }
+                let clusters = n.first as usize * GROUP..(n.end as usize * GROUP).min(hierarchy.clusters());
+                simplify(positions, &hierarchy.coarse[clusters], PROXY_TRIANGLES).0
+            })
+            .collect();
+        GroupTree { nodes, proxies: PacketLists::new(proxies.iter().map(|p| &p[..])) }
+    }
+
+    /// Per node, the box around its groups' boxes (`group_bounds`) and its proxy.
+    pub fn bounds(&self, group_bounds: &[[Vec3; 2]]) -> Vec<[Vec3; 2]> {
+        let mut bounds = vec![EMPTY_BOX; self.nodes.len()];
+        for n in (0..self.nodes.len()).rev() {
+            let node = self.nodes[n];
+            bounds[n] = if node.children == LEAF {
+                group_bounds[node.first as usize]
+            } else {
+                union(&bounds[node.children[0] as usize], &bounds[node.children[1] as usize])
+            };
+            for packet in self.proxies.of(n) {
+                bounds[n] = union(&bounds[n], &packet.bounds);
+            }
+        }
+        bounds
+    }
+}
+
+/// Halves `first..end` down to single groups; appends nodes in pre-order, returns the root.
+fn split(first: u32, end: u32, nodes: &mut Vec<GroupNode>) -> u32 {
+    let id = nodes.len() as u32;
+    nodes.push(GroupNode { first, end, children: LEAF });
+    if end - first > 1 {
+        let mid = first + (end - first) / 2;
+        let left = split(first, mid, nodes);
+        let right = split(mid, end, nodes);
+        nodes[id as usize].children = [left, right];
+    }
+    id
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::clusters::tests_support::sphere;
+
+    #[test]
+    fn nodes_cover_every_group_once_and_proxies_are_small() {
+        let (v, t) = sphere(40);
+        let h = Hierarchy::build(&v, &t, 400, 1);
+        let mut tree = GroupTree::build(&v, &h);
+        let leaves: Vec<u32> = tree.nodes.iter().filter(|n| n.children == LEAF).map(|n| n.first).collect();
+        assert_eq!(leaves, (0..h.groups() as u32).collect::<Vec<_>>());
+        for (n, node) in tree.nodes.iter().enumerate() {
+            let proxy: u32 = tree.proxies.of(n).iter().map(|p| p.lanes.count_ones()).sum();
+            if node.children == LEAF {
+                assert_eq!(proxy, 0);
+            } else {
+                assert!(proxy > 0 && proxy as usize <= 4 * PROXY_TRIANGLES, "node {n}: {proxy}");
+            }
+        }
+        tree.proxies.update(&v);
+        let groups: Vec<[Vec3; 2]> = (0..h.groups()).map(|g| crate::mesh::box_of(h.group_compact[g].vertices.iter().map(|&i| v[i as usize]))).collect();
+        let bounds = tree.bounds(&groups);
+        assert!((0..3).all(|a| bounds[0][0][a] <= -0.8 && bounds[0][1][a] >= 0.8));
+    }
+}
