@@ -121,6 +121,12 @@ impl PlaneTable {
         &self.masks[texel_of(m, self.resolution)]
     }
 
+    /// The texel `lookup` reads for normal m (pair with `prefetch` and `mask_at`).
+    #[inline(always)]
+    pub fn texel(&self, m: [f32; 3]) -> u32 {
+        texel_of(m, self.resolution) as u32
+    }
+
     /// Texel indices of `LANES` normals given as components (x, y, z), the same as `lookup`'s,
     /// written so that the loop vectorises: the face by selects, the coordinates clamped in
     /// float (NaN to 0, as the saturating casts of `texel_of` do) before an unchecked

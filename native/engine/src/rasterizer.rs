@@ -40,6 +40,14 @@ pub fn above_horizon(a: [f32; 3], b: [f32; 3], c: [f32; 3]) -> bool {
 /// or touching the receiver.
 #[inline(always)]
 pub fn triangle_mask(table: &PlaneTable, a: [f32; 3], b: [f32; 3], c: [f32; 3]) -> Option<Mask> {
+    let [ab, bc, ca] = triangle_texels(table, a, b, c)?;
+    Some(Mask::and3(table.mask_at(ab), table.mask_at(bc), table.mask_at(ca)))
+}
+
+/// The table texels of the three edge planes whose masks `triangle_mask` ANDs (None when it
+/// covers nothing), for callers that prefetch them before use.
+#[inline(always)]
+pub fn triangle_texels(table: &PlaneTable, a: [f32; 3], b: [f32; 3], c: [f32; 3]) -> Option<[u32; 3]> {
     if !above_horizon(a, b, c) {
         return None;
     }
@@ -50,7 +58,7 @@ pub fn triangle_mask(table: &PlaneTable, a: [f32; 3], b: [f32; 3], c: [f32; 3]) 
     }
     // Orient the edge planes so that the opposite vertex is on their positive side.
     let (ab, bc, ca) = if det > 0.0 { (ab, bc, ca) } else { (negate(ab), negate(bc), negate(ca)) };
-    Some(Mask::and3(table.lookup(ab), table.lookup(bc), table.lookup(ca)))
+    Some([table.texel(ab), table.texel(bc), table.texel(ca)])
 }
 
 /// Corners of `LANES` triangles relative to a receiver, in its tangent frame: corner k,

@@ -46,6 +46,8 @@ pub trait Sink {
     fn done(&self) -> bool {
         false
     }
+    /// Completes what the sink has queued; the walk calls it before it returns.
+    fn flush(&mut self) {}
 }
 
 /// The parts of a prepared scene a walk reads.
@@ -131,6 +133,12 @@ impl Walk<'_> {
 
     #[inline(always)]
     fn run_portable<S: Sink>(&self, receiver: &Receiver, scratch: &mut Vec<Vec3>, sink: &mut S) {
+        self.walk(receiver, scratch, sink);
+        sink.flush();
+    }
+
+    #[inline(always)]
+    fn walk<S: Sink>(&self, receiver: &Receiver, scratch: &mut Vec<Vec3>, sink: &mut S) {
         let mut stack: Vec<u32> = Vec::with_capacity(64);
         if self.top.nodes.is_empty() {
             return;
