@@ -19,7 +19,7 @@ use crate::scene::clusters::{simplify, union, PROXY_TRIANGLES};
 /// A node is drawn through its proxy when its bounding sphere's radius is below this fraction
 /// of its distance. Measured by bench/group_tree.py (docs/benchmarks_group_tree.md): against
 /// the exact path, the median error of transfer grows by a tenth to a fifth of a point at 0.5
-/// and twice that at 0.7, while the 126k-vertex Suzanne's frame takes a quarter less at 0.5.
+/// and about twice that at 0.7, while the 126k-vertex Suzanne's frame takes a third less at 0.5.
 pub const FAR_LOD: f32 = 0.5;
 
 #[derive(Clone, Copy, Debug)]
