@@ -15,7 +15,7 @@ use std::sync::{Arc, Mutex};
 
 use rayon::prelude::*;
 
-use crate::disk_mask::{cell_direction, Mask, MASK_SIDE};
+use crate::disk_mask::{cell_direction, Mask, MASK_SIDE, MASK_WORDS};
 use crate::error::{Error, Result};
 use crate::large_pages::LargePageVec;
 
@@ -53,6 +53,7 @@ fn texel_of(m: [f32; 3], resolution: usize) -> usize {
 }
 
 /// Centre direction (not normalised) of a texel.
+#[inline(always)]
 fn texel_direction(face: usize, i: usize, j: usize, resolution: usize) -> [f32; 3] {
     let u = -1.0 + (i as f32 + 0.5) * 2.0 / resolution as f32;
     let v = -1.0 + (j as f32 + 0.5) * 2.0 / resolution as f32;
@@ -64,14 +65,79 @@ fn texel_direction(face: usize, i: usize, j: usize, resolution: usize) -> [f32; 
     }
 }
 
-fn half_space_mask(m: [f32; 3], cells: &[(usize, usize, [f32; 3])]) -> Mask {
-    let mut mask = Mask::EMPTY;
-    for &(row, col, d) in cells {
-        if m[0] * d[0] + m[1] * d[1] + m[2] * d[2] >= 0.0 {
-            mask.set(row, col);
+/// The disk's cell directions by mask word: bit k of word w is cell 64 w + k (row-major),
+/// with its direction in lane k (zero outside the disk, where `inside` clears the bit).
+struct CellWords {
+    x: [[f32; 64]; MASK_WORDS],
+    y: [[f32; 64]; MASK_WORDS],
+    z: [[f32; 64]; MASK_WORDS],
+    inside: [u64; MASK_WORDS],
+}
+
+impl CellWords {
+    fn new() -> Self {
+        let mut words = CellWords { x: [[0.0; 64]; MASK_WORDS], y: [[0.0; 64]; MASK_WORDS], z: [[0.0; 64]; MASK_WORDS], inside: [0; MASK_WORDS] };
+        for row in 0..MASK_SIDE {
+            for col in 0..MASK_SIDE {
+                if let Some(d) = cell_direction(row, col) {
+                    let (w, k) = ((row * MASK_SIDE + col) / 64, (row * MASK_SIDE + col) % 64);
+                    (words.x[w][k], words.y[w][k], words.z[w][k]) = (d[0], d[1], d[2]);
+                    words.inside[w] |= 1 << k;
+                }
+            }
+        }
+        words
+    }
+
+    /// The cells on the positive side of the plane with normal m: the same sums, in the same
+    /// order, as a cell-by-cell test, written lane-parallel so that the table (393,216 masks
+    /// at resolution 256, half a second of every scene's first query) builds in vector code.
+    #[inline(always)]
+    fn half_space(&self, m: [f32; 3]) -> Mask {
+        let mut mask = Mask::EMPTY;
+        for w in 0..MASK_WORDS {
+            let (x, y, z) = (&self.x[w], &self.y[w], &self.z[w]);
+            let mut dots = [0.0f32; 64];
+            for k in 0..64 {
+                dots[k] = m[0] * x[k] + m[1] * y[k] + m[2] * z[k];
+            }
+            // Eight lanes to a byte: a compare and a move-mask each.
+            let mut bits = 0u64;
+            for (b, lanes) in dots.chunks_exact(8).enumerate() {
+                let byte = lanes.iter().enumerate().fold(0u64, |byte, (j, &d)| byte | ((d >= 0.0) as u64) << j);
+                bits |= byte << (8 * b);
+            }
+            mask.0[w] = bits & self.inside[w];
+        }
+        mask
+    }
+
+    /// `half_space` of every texel of `masks` (table index `first` on), compiled for AVX2 as
+    /// well and picked at run time.
+    fn fill(&self, masks: &mut [Mask], first: usize, resolution: usize) {
+        #[cfg(target_arch = "x86_64")]
+        if std::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU supports the feature the function is compiled for.
+            return unsafe { self.fill_avx2(masks, first, resolution) };
+        }
+        self.fill_portable(masks, first, resolution)
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn fill_avx2(&self, masks: &mut [Mask], first: usize, resolution: usize) {
+        self.fill_portable(masks, first, resolution)
+    }
+
+    #[inline(always)]
+    fn fill_portable(&self, masks: &mut [Mask], first: usize, resolution: usize) {
+        for (offset, mask) in masks.iter_mut().enumerate() {
+            let index = first + offset;
+            let (face, rest) = (index / (resolution * resolution), index % (resolution * resolution));
+            let (j, i) = (rest / resolution, rest % resolution);
+            *mask = self.half_space(texel_direction(face, i, j, resolution));
         }
     }
-    mask
 }
 
 impl PlaneTable {
@@ -81,16 +147,10 @@ impl PlaneTable {
                 "plane table resolution must be between 4 and 512, got {resolution}"
             )));
         }
-        let cells: Vec<(usize, usize, [f32; 3])> = (0..MASK_SIDE)
-            .flat_map(|row| (0..MASK_SIDE).map(move |col| (row, col)))
-            .filter_map(|(row, col)| cell_direction(row, col).map(|d| (row, col, d)))
-            .collect();
+        let cells = CellWords::new();
         let mut masks = LargePageVec::filled(Mask::EMPTY, 6 * resolution * resolution);
-        masks.par_iter_mut().enumerate().for_each(|(index, mask)| {
-            let (face, rest) = (index / (resolution * resolution), index % (resolution * resolution));
-            let (j, i) = (rest / resolution, rest % resolution);
-            *mask = half_space_mask(texel_direction(face, i, j, resolution), &cells);
-        });
+        const CHUNK: usize = 1024;
+        masks.par_chunks_mut(CHUNK).enumerate().for_each(|(c, chunk)| cells.fill(chunk, c * CHUNK, resolution));
         Ok(PlaneTable { resolution, masks })
     }
 
@@ -183,6 +243,33 @@ impl PlaneTable {
 mod tests {
     use super::*;
     use crate::disk_mask::disk;
+
+    #[test]
+    fn word_parallel_half_spaces_equal_the_cell_by_cell_test() {
+        let words = CellWords::new();
+        let mut normals: Vec<[f32; 3]> = (0..6 * 24 * 24).map(|t| texel_direction(t / 576, t % 24, t / 24 % 24, 24)).collect();
+        normals.extend([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, 0.0], [f32::NAN, 1.0, 0.0], [1e-30, -1e-30, 0.0]]);
+        for m in normals {
+            let mut expected = Mask::EMPTY;
+            for row in 0..MASK_SIDE {
+                for col in 0..MASK_SIDE {
+                    if let Some(d) = cell_direction(row, col) {
+                        if m[0] * d[0] + m[1] * d[1] + m[2] * d[2] >= 0.0 {
+                            expected.set(row, col);
+                        }
+                    }
+                }
+            }
+            assert_eq!(words.half_space(m), expected, "{m:?}");
+        }
+        // The run-time dispatched fill (AVX2 here) gives the same masks as the portable code.
+        let mut filled = vec![Mask::EMPTY; 6 * 24 * 24];
+        words.fill(&mut filled[100..], 100, 24);
+        for (index, mask) in filled.iter().enumerate().skip(100) {
+            let (face, rest) = (index / 576, index % 576);
+            assert_eq!(*mask, words.half_space(texel_direction(face, rest % 24, rest / 24, 24)), "texel {index}");
+        }
+    }
 
     #[test]
     fn default_table_is_twelve_mebibytes() {
