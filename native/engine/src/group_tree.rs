@@ -77,6 +77,15 @@ impl GroupTree {
     }
 }
 
+/// Whether a node with box `b` is drawn through its proxy from `origin`: its radius is below
+/// `far_lod` (given squared) x its distance.
+#[inline(always)]
+pub fn is_far(b: &[Vec3; 2], origin: Vec3, lod2: f32) -> bool {
+    let d2: f32 = (0..3).map(|a| (0.5 * (b[0][a] + b[1][a]) - origin[a]).powi(2)).sum();
+    let r2: f32 = (0..3).map(|a| (0.5 * (b[1][a] - b[0][a])).powi(2)).sum();
+    r2 < lod2 * d2
+}
+
 /// Halves `first..end` down to single groups; appends nodes in pre-order, returns the root.
 fn split(first: u32, end: u32, nodes: &mut Vec<GroupNode>) -> u32 {
     let id = nodes.len() as u32;

@@ -13,7 +13,7 @@ use rayon::prelude::*;
 
 use crate::disk_mask::{disk, Mask};
 use crate::error::{Error, Result};
-use crate::group_tree::{GroupTree, FAR_LOD, LEAF};
+use crate::group_tree::{is_far, GroupTree, FAR_LOD, LEAF};
 use crate::hierarchy::{default_coarse_triangles, morton_permutation, Hierarchy, GROUP};
 use crate::integrate::{Brdf, Quadrature};
 use crate::mesh::{box_of, check_finite, weld, welded_normals, Normalization, Vec3};
@@ -475,12 +475,8 @@ impl Solver {
     /// that moved except below its horizon in both frames: then its blockers are the same.
     fn same_walk(&self, receiver: &Receiver, frame: &Frame, last: &LastFrame, group_moved: &[bool], node_moved: &[bool]) -> bool {
         let tree = &self.group_tree;
-        let lod2 = if frame.use_pvs || !self.blockers.hierarchy { 0.0 } else { self.blockers.far_lod.powi(2) };
-        let far = |b: &[Vec3; 2]| {
-            let d2: f32 = (0..3).map(|a| (0.5 * (b[0][a] + b[1][a]) - receiver.origin[a]).powi(2)).sum();
-            let r2: f32 = (0..3).map(|a| (0.5 * (b[1][a] - b[0][a])).powi(2)).sum();
-            r2 < lod2 * d2
-        };
+        let lod2 = self.far_lod2(frame);
+        let far = |b: &[Vec3; 2]| is_far(b, receiver.origin, lod2);
         let mut stack = vec![0u32];
         while let Some(n) = stack.pop() {
             let n = n as usize;
@@ -573,8 +569,7 @@ impl Solver {
         let mut mask = Mask::EMPTY;
         let mut pipeline = Pipeline::default();
         let mut rasterized = 0u32;
-        // The potentially visible sets are per cluster: with them, every group is opened.
-        let lod2 = if frame.use_pvs || !self.blockers.hierarchy { 0.0 } else { self.blockers.far_lod.powi(2) };
+        let lod2 = self.far_lod2(frame);
         let mut stack: Vec<u32> = Vec::with_capacity(64);
         if !tree.nodes.is_empty() {
             stack.push(0);
@@ -592,10 +587,7 @@ impl Solver {
                 }
                 continue;
             }
-            let [lo, hi] = frame.node_bounds[n];
-            let d2: f32 = (0..3).map(|a| (0.5 * (lo[a] + hi[a]) - origin[a]).powi(2)).sum();
-            let r2: f32 = (0..3).map(|a| (0.5 * (hi[a] - lo[a])).powi(2)).sum();
-            if r2 < lod2 * d2 {
+            if is_far(&frame.node_bounds[n], origin, lod2) {
                 for packet in tree.proxies.of(n) {
                     rasterized += pipeline.rasterize_packet(table, origin, &receiver.frame, packet, u32::MAX, r as u32, &mut mask);
                 }
@@ -607,29 +599,33 @@ impl Solver {
         (mask, rasterized as u64)
     }
 
+    /// The square of the group tree's `far_lod` in this frame; 0 (every group opened) without
+    /// the hierarchy or with the potentially visible sets, which are per cluster. One place
+    /// for the walk and for `same_walk`, whose reuse is only sound when they agree.
+    #[inline(always)]
+    fn far_lod2(&self, frame: &Frame) -> f32 {
+        if frame.use_pvs || !self.blockers.hierarchy { 0.0 } else { self.blockers.far_lod.powi(2) }
+    }
+
     /// Group `g`'s blockers for receiver `r`: see `own_mask_portable`.
     #[inline(always)]
     fn group_blockers(&self, g: usize, r: usize, frame: &Frame, receiver: &Receiver, pipeline: &mut Pipeline, mask: &mut Mask) -> u32 {
         let (h, table, origin) = (&self.hierarchy, &*self.table, receiver.origin);
         let first = g * GROUP;
         let clusters = (first + GROUP).min(h.clusters()) - first;
-        let mut expanded = bits_of(h.near_of(r), first, clusters);
         let seen = self.pvs.as_ref().filter(|_| frame.use_pvs).map_or(u32::MAX, |pvs| bits_of(pvs.of(r), first, clusters));
         if seen == 0 || (self.blockers.cull && receiver.below_horizon(&frame.group_bounds[g])) {
             return 0;
         }
         let mut rasterized = 0;
-        if !self.blockers.hierarchy {
-            expanded = (1 << clusters) - 1;
-        } else {
-            expanded |= close_clusters(receiver, &frame.spheres[first..first + clusters]);
+        let expanded = self.expanded_clusters(r, receiver, frame, first, clusters);
+        if self.blockers.hierarchy {
             for (p, packet) in self.coarse_packets.of(g).iter().enumerate() {
                 let far = (!expanded & seen) >> (p * LANES);
                 rasterized += pipeline.rasterize_packet(table, origin, &receiver.frame, packet, far, r as u32, mask);
             }
         }
-        expanded &= seen;
-        let mut bits = expanded;
+        let mut bits = expanded & seen;
         while bits != 0 {
             let c = first + bits.trailing_zeros() as usize;
             bits &= bits - 1;
