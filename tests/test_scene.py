@@ -337,6 +337,54 @@ def test_gather_matches_first_hits(probes):
     assert np.median(err) < 0.07 and err.max() < 0.11
 
 
+def test_bounce_weights_give_the_gather_under_any_radiance():
+    """Recorded once, the weights give `gather` + the lobe along each normal for whatever
+    radiance the scene shows later, per-instance radiance and a mirrored instance included;
+    a scene whose vertices or instances changed is refused."""
+    from hemishadow.lightmap.bounce import lobe_irradiance
+    world = glowing_room()
+    scene = world.engine(hemishadow)
+    rng = np.random.default_rng(5)
+    points = rng.uniform([-1.0, -1.0, 0.05], [1.0, 1.0, 1.4], (300, 3))
+    normals = rng.normal(size=(300, 3))
+    weights = scene.bounce_weights(points, normals)
+    assert len(weights) == 300 and weights.entries > 300
+    counts = {m: len(world.meshes[m][0]) for m in range(len(world.meshes))}
+    for trial in range(3):
+        for m, n in counts.items():
+            scene.set_radiance(m, rng.uniform(0, 2, (n, 3)))
+        if trial == 2:  # the mirrored roof glows on its own
+            scene.set_radiance(0, rng.uniform(0, 5, (counts[0], 3)), instance_id=1)
+        expected = lobe_irradiance(scene.gather(points, normals, bands=3), (normals / np.linalg.norm(normals, axis=1, keepdims=True))[:, None])[:, 0]
+        got = weights.irradiance()
+        assert got.shape == (300, 3) and got.dtype == np.float32
+        np.testing.assert_allclose(got, expected, atol=2e-5 * expected.max())
+        assert (expected > 0.01).mean() > 0.5  # most receivers see something lit
+    scene.add_instance(1, y_up(1.0, (-0.6, -0.5, 0.74)))
+    with pytest.raises(ValueError, match="changed since these bounce weights"):
+        weights.irradiance()
+
+
+def test_bounce_passes_agree_with_and_without_recorded_weights(monkeypatch):
+    """`vertex_radiance` reuses recorded weights; past its memory budget it gathers every
+    pass: both give the same radiance."""
+    from hemishadow.lightmap import bounce
+    world = glowing_room()
+    rng = np.random.default_rng(6)
+    receivers, direct = [], []
+    for m, (v, t) in enumerate(world.meshes):
+        normals = np.tile([0.0, 0.0, 1.0], (len(v), 1)) if m == 0 else rng.normal(size=(len(v), 3))
+        usable = rng.random(len(v)) > 0.1
+        receivers.append((m, v + 0.0, normals, usable, np.full((len(v), 3), 0.7), np.zeros((len(v), 3))))
+        direct.append(rng.uniform(0, 1, (len(v), 3)).astype(np.float32))
+    recorded = bounce.vertex_radiance(world.engine(hemishadow), receivers, direct, 3)
+    monkeypatch.setattr(bounce, "MAX_WEIGHT_ENTRIES", 0)
+    gathered = bounce.vertex_radiance(world.engine(hemishadow), receivers, direct, 3)
+    for r, g in zip(recorded, gathered):
+        np.testing.assert_allclose(r, g, atol=1e-5)
+    assert max(np.abs(r - 0.7 * d).max() for r, d in zip(recorded, direct)) > 0.05  # bounce light was added
+
+
 def test_visibility_masks_are_the_transfer_masks():
     scene = room().engine(hemishadow)
     points, normals = np.array([[0.5, -0.5, 0.01], [-2.0, 0.0, 0.5]]), np.array([[0, 0, 1.0], [1.0, 0, 0]])

@@ -398,6 +398,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(disk_cells, m)?)?;
     m.add_class::<PySolver>()?;
     m.add_class::<scene::PyScene>()?;
+    m.add_class::<scene::PyBounceWeights>()?;
     m.add_function(wrap_pyfunction!(panorama::panorama_hits, m)?)?;
     m.add_class::<panorama::PyRelighter>()?;
     m.add("Cancelled", m.py().get_type::<Cancelled>())?;

@@ -16,6 +16,26 @@ pub struct PyScene {
     pub(crate) inner: Box<engine::scene::Scene>,
 }
 
+/// Recorded gather weights of receivers (`Scene.bounce_weights`), applied with
+/// `Scene.apply_bounce_weights` to the radiance the scene shows at the time.
+#[pyclass(name = "BounceWeights", module = "hemishadow._native", frozen)]
+pub struct PyBounceWeights {
+    inner: engine::scene::bounce_weights::BounceWeights,
+}
+
+#[pymethods]
+impl PyBounceWeights {
+    fn __len__(&self) -> usize {
+        self.inner.receivers()
+    }
+
+    /// (vertex, weight) pairs stored over all receivers.
+    #[getter]
+    fn entries(&self) -> usize {
+        self.inner.entries()
+    }
+}
+
 pub(crate) fn matrix16(m: &PyReadonlyArray2<f64>) -> PyResult<[f64; 16]> {
     let view = m.as_array();
     if view.shape() != [4, 4] {
@@ -240,6 +260,30 @@ impl PyScene {
         let inner = &mut self.inner;
         let hit = run(py, || inner.occluded(&p, &t, offset))?;
         Ok(Array1::from_vec(hit).into_pyarray(py))
+    }
+
+    #[pyo3(signature = (points, normals, offset, table_resolution=None, progress=None))]
+    fn bounce_weights(
+        &mut self,
+        py: Python<'_>,
+        points: PyReadonlyArray2<f32>,
+        normals: PyReadonlyArray2<f32>,
+        offset: Option<f32>,
+        table_resolution: Option<usize>,
+        progress: Option<Py<PyAny>>,
+    ) -> PyResult<PyBounceWeights> {
+        let (p, n) = (rows3(&points, "points")?, rows3(&normals, "normals")?);
+        let inner = &mut self.inner;
+        let mut reporter = PyProgress::new(progress);
+        let report = &mut reporter;
+        let result = run(py, || inner.bounce_weights(&p, &n, offset, table_resolution, &mut |f| report.report(f)));
+        Ok(PyBounceWeights { inner: reporter.finish(result)? })
+    }
+
+    fn apply_bounce_weights<'py>(&self, py: Python<'py>, weights: &PyBounceWeights) -> PyResult<Bound<'py, PyArray2<f32>>> {
+        let inner = &self.inner;
+        let values = run(py, || inner.apply_bounce_weights(&weights.inner))?;
+        Ok(Array2::from_shape_vec((weights.inner.receivers(), 3), values).expect("P x 3").into_pyarray(py))
     }
 
     #[pyo3(signature = (points, normals, bands, offset, progress=None))]

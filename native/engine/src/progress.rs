@@ -38,6 +38,26 @@ pub fn par_rows<S>(
     Ok(())
 }
 
+/// `work(row, scratch)` for rows 0..rows on all cores, collected in order, one chunk at a time
+/// with progress as `par_rows` (for results of varying size).
+pub fn par_collect<S, T: Send>(
+    rows: usize,
+    progress: Progress,
+    init: impl Fn() -> S + Sync + Send,
+    work: impl Fn(usize, &mut S) -> T + Sync + Send,
+) -> Result<Vec<T>> {
+    let chunk = chunk_rows(rows);
+    let mut out = Vec::with_capacity(rows);
+    for first in (0..rows).step_by(chunk) {
+        let end = (first + chunk).min(rows);
+        out.par_extend((first..end).into_par_iter().map_init(&init, |scratch, r| work(r, scratch)));
+        if !progress(end as f32 / rows as f32) {
+            return Err(Error::Cancelled);
+        }
+    }
+    Ok(out)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -54,6 +74,19 @@ mod tests {
         assert!(out.chunks(2).enumerate().all(|(r, row)| row == [r as f32, r as f32]));
         assert_eq!(*reports.last().unwrap(), 1.0);
         assert!(reports.windows(2).all(|w| w[0] < w[1]));
+    }
+
+    #[test]
+    fn collected_rows_come_in_order_and_cancel_stops() {
+        let rows = par_collect(5000, &mut |_| true, || (), |r, _| vec![r; r % 3]).unwrap();
+        assert!(rows.iter().enumerate().all(|(r, v)| v.len() == r % 3 && v.iter().all(|&x| x == r)));
+        let mut calls = 0;
+        let cancelled = par_collect(5000, &mut |_| {
+            calls += 1;
+            false
+        }, || (), |r, _| r);
+        assert!(matches!(cancelled, Err(Error::Cancelled)));
+        assert_eq!(calls, 1);
     }
 
     #[test]

@@ -213,6 +213,19 @@ class Scene:
         return self._native.gather(pts, norms, _checks.band_count(bands), _checks.offset(offset),
                                    _checks.progress(progress))
 
+    def bounce_weights(self, points, normals, *, offset=None, table_resolution=None, progress=None):
+        """Records, per receiver, the weight of every vertex it sees in `gather`'s ordered mode,
+        so that bounce passes, which change only the radiance, need no walk through the scene:
+        `BounceWeights.irradiance()` then equals `gather(points, normals, bands=3)` evaluated
+        along each normal (irradiance / pi, clamped at 0; `lightmap.bounce.lobe_irradiance`)
+        under whatever radiance the scene shows at that time. Valid while the scene's
+        geometry and instances stay as they are. table_resolution: the plane table's (default:
+        the scene's)."""
+        pts, norms = self._receivers(points, normals)
+        resolution = None if table_resolution is None else int(table_resolution)
+        native = self._native.bounce_weights(pts, norms, _checks.offset(offset), resolution, _checks.progress(progress))
+        return BounceWeights(self, native)
+
     def _receivers(self, points, normals):
         pts = _checks.points(points, "points")
         return pts, _normals(normals, len(pts))
@@ -227,3 +240,24 @@ class Scene:
         if isinstance(mesh_id, bool) or not isinstance(mesh_id, (int, np.integer)) or not 0 <= mesh_id < len(self._meshes):
             raise ValueError(f"mesh id must be an integer in 0..{len(self._meshes) - 1}, got {mesh_id!r}")
         return int(mesh_id)
+
+
+class BounceWeights:
+    """Receivers' recorded gather weights (`Scene.bounce_weights`)."""
+
+    def __init__(self, scene, native):
+        self._scene = scene
+        self._native = native
+
+    def __len__(self):
+        return len(self._native)
+
+    @property
+    def entries(self):
+        """(vertex, weight) pairs stored over all receivers (8 bytes each)."""
+        return self._native.entries
+
+    def irradiance(self):
+        """Irradiance / pi float32 (P, 3) along each receiver's normal, gathered from the
+        radiance the scene shows now, clamped at 0."""
+        return np.maximum(self._scene._native.apply_bounce_weights(self._native), np.float32(0.0))

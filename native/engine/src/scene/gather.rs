@@ -57,6 +57,16 @@ impl Projector {
         self.basis.coeffs()
     }
 
+    /// The integral of each local basis function over one cell's solid angle.
+    pub fn cell_weights(&self, cell: usize) -> &[f32] {
+        let k = self.coeffs();
+        &self.weights[cell * k..(cell + 1) * k]
+    }
+
+    pub fn basis(&self) -> &ShBasis {
+        &self.basis
+    }
+
     /// Adds the SH projection (k x 3, coefficient-major) of what `sink` saw to `out`.
     pub fn add(&self, sink: &DepthSink, receiver: &Receiver, out: &mut [f32]) {
         let k = self.coeffs();
@@ -66,7 +76,7 @@ impl Projector {
                 continue;
             }
             let rgb = sink.colour[cell];
-            let w = &self.weights[cell * k..(cell + 1) * k];
+            let w = self.cell_weights(cell);
             for ch in 0..3 {
                 if rgb[ch] != 0.0 {
                     local[ch][..k].iter_mut().zip(w).for_each(|(l, w)| *l += rgb[ch] * w);

@@ -11,6 +11,7 @@
 //! instances builds what is new (and rebuilds the top tree, which is cheap).
 
 pub mod affine;
+pub mod bounce_weights;
 pub mod casters;
 pub mod clusters;
 pub mod gather;
@@ -40,11 +41,12 @@ use crate::error::{Error, Result};
 use crate::integrate::Quadrature;
 use crate::mesh::{check_finite, Vec3};
 use crate::plane_table::PlaneTable;
-use crate::progress::{par_rows, Progress};
+use crate::progress::{par_collect, par_rows, Progress};
 use crate::sh::ShBasis;
 use crate::transfer::{check_brdf, checked_downsample, Settings};
 
 use affine::Affine;
+use bounce_weights::BounceWeights;
 use clusters::{union, MeshTree, EMPTY_BOX};
 use ordered::{DepthSink, Rgb};
 use top::TopTree;
@@ -309,6 +311,11 @@ impl Scene {
         (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt()
     }
 
+    /// A walk over every instance of the prepared scene.
+    fn scene_walk<'a>(&'a self, trees: &'a [&'a MeshTree], positions: &'a [&'a [Vec3]]) -> Walk<'a> {
+        Walk { trees, positions, instances: &self.instances, top: self.top.as_ref().expect("prepared"), lod: self.lod, exclude: &[], near_proxies: false }
+    }
+
     fn walk_parts(&self) -> (Vec<&MeshTree>, Vec<&[Vec3]>) {
         let trees = self.meshes.iter().map(|m| m.tree.as_ref().expect("prepared")).collect();
         let positions = self.meshes.iter().map(|m| m.positions.as_slice()).collect();
@@ -328,7 +335,7 @@ impl Scene {
         let quadrature = Quadrature::new(downsample, basis);
         let k = quadrature.basis().coeffs();
         let (trees, positions) = self.walk_parts();
-        let walk = Walk { trees: &trees, positions: &positions, instances: &self.instances, top: self.top.as_ref().expect("prepared"), lod: self.lod, exclude: &[], near_proxies: false };
+        let walk = self.scene_walk(&trees, &positions);
         let full = disk();
         let counted = AtomicU64::new(0);
         let mut out = vec![0.0f32; points.len() * k];
@@ -352,7 +359,7 @@ impl Scene {
         let offset = receivers::offset(offset, self.size())?;
         let table = PlaneTable::shared(self.table_resolution)?;
         let (trees, positions) = self.walk_parts();
-        let walk = Walk { trees: &trees, positions: &positions, instances: &self.instances, top: self.top.as_ref().expect("prepared"), lod: self.lod, exclude: &[], near_proxies: false };
+        let walk = self.scene_walk(&trees, &positions);
         let full = disk();
         Ok(points
             .par_iter()
@@ -407,7 +414,7 @@ impl Scene {
         let offset = receivers::offset(offset, self.size())?;
         let table = PlaneTable::shared(self.table_resolution)?;
         let (trees, positions) = self.walk_parts();
-        let walk = Walk { trees: &trees, positions: &positions, instances: &self.instances, top: self.top.as_ref().expect("prepared"), lod: self.lod, exclude: &[], near_proxies: false };
+        let walk = self.scene_walk(&trees, &positions);
         let radiance: Vec<Option<&[Rgb]>> = vec![None; self.instances.len()];
         Ok(points
             .par_iter()
@@ -430,7 +437,7 @@ impl Scene {
         let offset = receivers::offset(offset, self.size())?;
         let table = PlaneTable::shared(self.table_resolution)?;
         let (trees, positions) = self.walk_parts();
-        let walk = Walk { trees: &trees, positions: &positions, instances: &self.instances, top: self.top.as_ref().expect("prepared"), lod: self.lod, exclude: &[], near_proxies: false };
+        let walk = self.scene_walk(&trees, &positions);
         let radiance = self.radiance_by_instance();
         let k = projector.coeffs();
         let mut out = vec![0.0f32; points.len() * k * 3];
@@ -447,6 +454,41 @@ impl Scene {
             }
         })?;
         Ok(out)
+    }
+
+    /// What `gather` (3 bands) then the lobe along each normal would give, recorded as weights
+    /// on the vertices each receiver sees (`bounce_weights`), for bounce passes that change
+    /// only the radiance. `table_resolution`: the plane table's (default: the scene's).
+    pub fn bounce_weights(&mut self, points: &[Vec3], normals: &[Vec3], offset: Option<f32>, table_resolution: Option<usize>, progress: Progress) -> Result<BounceWeights> {
+        receivers::check(points, Some(normals))?;
+        let offset = receivers::offset(offset, self.size())?;
+        let table = PlaneTable::shared(table_resolution.unwrap_or(self.table_resolution))?;
+        let first_slot = bounce_weights::first_slots(self.instance_vertex_counts().into_iter())?;
+        let slots = *first_slot.last().expect("non-empty") as usize;
+        let cell_weights = bounce_weights::normal_cell_weights();
+        let (trees, positions) = self.walk_parts();
+        let walk = self.scene_walk(&trees, &positions);
+        let black: Vec<Option<&[Rgb]>> = vec![None; self.instances.len()];
+        let rows = par_collect(points.len(), progress, || bounce_weights::Scratch::new(slots), |r, scratch| {
+            let receiver = receivers::receiver(points[r], normals[r], offset);
+            let mut hits = std::mem::take(&mut scratch.hits);
+            let mut sink = DepthSink::recording(&table, &black, &mut hits);
+            walk.run(&receiver, &mut scratch.stack, &mut sink);
+            let row = bounce_weights::row(&sink, &cell_weights, &first_slot, scratch);
+            scratch.hits = hits;
+            row
+        })?;
+        Ok(BounceWeights::new(rows, first_slot))
+    }
+
+    /// Irradiance / pi (3 per receiver, unclamped) that `weights` give under the radiance the
+    /// scene shows now (`set_radiance`, `set_instance_radiance`).
+    pub fn apply_bounce_weights(&self, weights: &BounceWeights) -> Result<Vec<f32>> {
+        weights.apply(&self.radiance_by_instance(), &self.instance_vertex_counts())
+    }
+
+    fn instance_vertex_counts(&self) -> Vec<usize> {
+        self.instances.iter().map(|(m, _)| self.meshes[*m as usize].positions.len()).collect()
     }
 }
 

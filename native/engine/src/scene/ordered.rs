@@ -29,6 +29,15 @@ const TIE: f32 = 1e-4;
 /// fetched on demand, its reads were about half of a gather's time).
 const QUEUE: usize = 8;
 
+/// The nearest blocker of a cell, as `bounce_weights` records it: the instance, the corners'
+/// vertex ids and the cell direction's barycentric weights on them.
+#[derive(Clone, Copy, Default)]
+pub struct Hit {
+    pub instance: u32,
+    pub ids: [u32; 3],
+    pub weights: [f32; 3],
+}
+
 /// A triangle whose masks are on their way.
 #[derive(Clone, Copy)]
 struct Queued {
@@ -47,6 +56,9 @@ pub struct DepthSink<'a> {
     pub back: Mask,
     pub colour: [Rgb; MASK_CELLS],
     pub triangles: u64,
+    /// When recording, each covered cell's nearest blocker (cells not covered keep stale
+    /// entries: read only where `depth` is finite).
+    hits: Option<&'a mut [Hit]>,
     /// A ring of triangles in arrival order: `queued` of them from `head` on.
     queue: [Option<Queued>; QUEUE],
     head: usize,
@@ -62,10 +74,22 @@ impl<'a> DepthSink<'a> {
             back: Mask::EMPTY,
             colour: [[0.0; 3]; MASK_CELLS],
             triangles: 0,
+            hits: None,
             queue: [None; QUEUE],
             head: 0,
             queued: 0,
         }
+    }
+
+    /// A sink that also records each cell's nearest blocker into `hits` (MASK_CELLS long).
+    pub fn recording(table: &'a PlaneTable, radiance: &'a [Option<&'a [Rgb]>], hits: &'a mut [Hit]) -> Self {
+        assert_eq!(hits.len(), MASK_CELLS);
+        DepthSink { hits: Some(hits), ..DepthSink::new(table, radiance) }
+    }
+
+    /// The recorded nearest blocker of a covered cell.
+    pub fn hit(&self, cell: usize) -> Option<&Hit> {
+        self.hits.as_ref().map(|h| &h[cell])
     }
 
     /// Cells some blocker covers.
@@ -140,18 +164,32 @@ impl DepthSink<'_> {
                 self.depth[cell] = t;
                 let bit = 1u64 << (cell % 64);
                 self.back.0[w] = if back { self.back.0[w] | bit } else { self.back.0[w] & !bit };
+                if corners.is_none() && self.hits.is_none() {
+                    continue;
+                }
+                let q = sub([d[0] * t, d[1] * t, d[2] * t], a);
+                let [alpha, beta, gamma] = barycentric(q, e1, e2, normal, nn);
                 if let Some([ra, rb, rc]) = corners {
-                    let q = sub([d[0] * t, d[1] * t, d[2] * t], a);
-                    let beta = (dot(cross(q, e2), normal) / nn).clamp(0.0, 1.0);
-                    let gamma = (dot(cross(e1, q), normal) / nn).clamp(0.0, 1.0);
-                    let sum = beta + gamma;
-                    let (beta, gamma) = if sum > 1.0 { (beta / sum, gamma / sum) } else { (beta, gamma) };
-                    let alpha = 1.0 - beta - gamma;
                     self.colour[cell] = [0, 1, 2].map(|k| alpha * ra[k] + beta * rb[k] + gamma * rc[k]);
+                }
+                if let Some(hits) = self.hits.as_deref_mut() {
+                    hits[cell] = Hit { instance: tag.instance, ids, weights: [alpha, beta, gamma] };
                 }
             }
         }
     }
+}
+
+/// Barycentric weights of the point `q` (relative to corner a) on the triangle with edges e1,
+/// e2 and normal e1 x e2 (squared length nn), clamped onto the triangle (quantised edge cells
+/// whose directions fall just outside it).
+#[inline(always)]
+fn barycentric(q: Vec3, e1: Vec3, e2: Vec3, normal: Vec3, nn: f32) -> [f32; 3] {
+    let beta = (dot(cross(q, e2), normal) / nn).clamp(0.0, 1.0);
+    let gamma = (dot(cross(e1, q), normal) / nn).clamp(0.0, 1.0);
+    let sum = beta + gamma;
+    let (beta, gamma) = if sum > 1.0 { (beta / sum, gamma / sum) } else { (beta, gamma) };
+    [1.0 - beta - gamma, beta, gamma]
 }
 
 #[cfg(test)]
