@@ -101,25 +101,16 @@ def bounce_light(prepared, progress=None):
     """(H, W, 3) outgoing radiance of bounced light at the pixels' surfaces under the scene's
     own lighting: the lightmap baker's vertex passes (`bounces` of them), gathered once per
     pixel over its geometric hemisphere, times the pixel's albedo."""
-    from hemishadow.lightmap import bounce, lamps, texels
+    from hemishadow.lightmap import bounce, lamps
 
     lb = importlib.import_module("hemishadow.lightmap.bake")  # the module: the package exports its `bake`
 
     scene, h = prepared.engine_scene, prepared.hits
     receivers = lb.bounce_receivers([], prepared.surfaces)
-    steps = lb.Steps(progress, sum(len(r[1]) for r in receivers), "panorama bounce")
-    offsets = texels.offsets(1)
+    steps = lb.Steps(progress, sum(len(r[1]) for r in receivers) * (1 + prepared.bounces), "panorama bounce")
     lighting, suns = lb.checked_lighting(prepared.lighting), lb.checked_suns(prepared.suns)
     lamp_list = [lamps.check(lamp, i) for i, lamp in enumerate(prepared.lamps)]
-    direct = []
-    for _, pts, nrm, ok, _, _ in receivers:
-        d = np.zeros((len(pts), 3), np.float32)
-        if ok.any():
-            d[ok] = lb.direct_light(scene, pts[ok], nrm[ok], nrm[ok][:, None], lighting, suns,
-                                    np.zeros(ok.sum(), np.int64), offsets, False, None, steps, exact_suns=False,
-                                    lamps=lamp_list, lamp_points=1)[0][:, 0]
-        direct.append(d)
-    bounce.vertex_radiance(scene, receivers, direct, prepared.bounces)
+    lb.vertex_bounce(scene, receivers, lighting, suns, lamp_list, prepared.bounces, None, steps)
     out = np.zeros(h.mask.shape + (3,), np.float32)
     gathered = scene.gather(h.position[h.mask], h.geometric_normal[h.mask], bands=bounce.BANDS)
     irradiance = bounce.lobe_irradiance(gathered, h.shading_normal[h.mask][:, None])[:, 0]

@@ -339,8 +339,9 @@ def test_gather_matches_first_hits(probes):
 
 def test_bounce_weights_give_the_gather_under_any_radiance():
     """Recorded once, the weights give `gather` + the lobe along each normal for whatever
-    radiance the scene shows later, per-instance radiance and a mirrored instance included;
-    a scene whose vertices or instances changed is refused."""
+    radiance the scene shows later, per-instance radiance and a mirrored instance included,
+    and their walk's masks are `visibility`'s; a scene whose vertices or instances changed
+    is refused."""
     from hemishadow.lightmap.bounce import lobe_irradiance
     world = glowing_room()
     scene = world.engine(hemishadow)
@@ -349,6 +350,7 @@ def test_bounce_weights_give_the_gather_under_any_radiance():
     normals = rng.normal(size=(300, 3))
     weights = scene.bounce_weights(points, normals)
     assert len(weights) == 300 and weights.entries > 300
+    np.testing.assert_array_equal(weights.masks, scene.visibility(points, normals))  # the same walk's masks
     counts = {m: len(world.meshes[m][0]) for m in range(len(world.meshes))}
     for trial in range(3):
         for m, n in counts.items():

@@ -28,7 +28,7 @@ STAGES = {
     "environment": ("light", "environment"),
     "sun": ("bake", "_sun_rays"),
     "lamp": ("lamps", "lamp_light"),
-    "bounce passes": ("bounce", "_gathered"),
+    "bounce passes": ("bounce", "_record"),
     "final gather": ("bounce", "vertex_radiance", "after"),
     "padding": ("dilate", "fill"),
     "atlas": ("atlas", "compose"),

@@ -34,6 +34,18 @@ impl PyBounceWeights {
     fn entries(&self) -> usize {
         self.inner.entries()
     }
+
+    /// The receivers' visibility masks (P, 16) uint64, as `Scene.visibility` gives them.
+    #[getter]
+    fn masks<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<u64>> {
+        packed_masks(py, &self.inner.masks)
+    }
+}
+
+/// Masks as (P, 16) uint64 rows, bit r * 32 + c set when cell (r, c) is blocked.
+fn packed_masks<'py>(py: Python<'py>, masks: &[engine::disk_mask::Mask]) -> Bound<'py, PyArray2<u64>> {
+    let flat: Vec<u64> = masks.iter().flat_map(|m| m.0).collect();
+    Array2::from_shape_vec((masks.len(), engine::disk_mask::MASK_WORDS), flat).expect("P x words").into_pyarray(py)
 }
 
 pub(crate) fn matrix16(m: &PyReadonlyArray2<f64>) -> PyResult<[f64; 16]> {
@@ -183,9 +195,7 @@ impl PyScene {
         let (p, n) = (rows3(&points, "points")?, rows3(&normals, "normals")?);
         let inner = &mut self.inner;
         let masks = run(py, || inner.visibility(&p, &n, offset))?;
-        let words = engine::disk_mask::MASK_WORDS;
-        let flat: Vec<u64> = masks.iter().flat_map(|m| m.0).collect();
-        Ok(Array2::from_shape_vec((p.len(), words), flat).expect("P x words").into_pyarray(py))
+        Ok(packed_masks(py, &masks))
     }
 
     /// Masks (P, 16) uint64 and validity (P,) from one rasterization each.
@@ -199,9 +209,7 @@ impl PyScene {
         let (p, n) = (rows3(&points, "points")?, rows3(&normals, "normals")?);
         let inner = &mut self.inner;
         let (masks, valid) = run(py, || inner.visibility_valid(&p, &n, offset))?;
-        let words = engine::disk_mask::MASK_WORDS;
-        let flat: Vec<u64> = masks.iter().flat_map(|m| m.0).collect();
-        Ok((Array2::from_shape_vec((p.len(), words), flat).expect("P x words").into_pyarray(py), Array1::from_vec(valid).into_pyarray(py)))
+        Ok((packed_masks(py, &masks), Array1::from_vec(valid).into_pyarray(py)))
     }
 
     fn valid<'py>(

@@ -69,7 +69,7 @@ pub type LocalCorners = [[[f32; LANES]; 3]; 3];
 /// cone has a solid angle. Written lane-parallel and branch-free so that it compiles to
 /// vector instructions.
 #[inline(always)]
-fn edge_texels(table: &PlaneTable, corners: &LocalCorners, texels: &mut [[u32; LANES]; 3]) -> u32 {
+pub fn edge_texels(table: &PlaneTable, corners: &LocalCorners, texels: &mut [[u32; LANES]; 3]) -> u32 {
     let [a, b, c] = corners;
     let mut planes = [[[0.0f32; LANES]; 3]; 3]; // edge ab, bc, ca; component; lane
     let mut solid = [false; LANES];

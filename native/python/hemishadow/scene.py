@@ -218,9 +218,10 @@ class Scene:
         so that bounce passes, which change only the radiance, need no walk through the scene:
         `BounceWeights.irradiance()` then equals `gather(points, normals, bands=3)` evaluated
         along each normal (irradiance / pi, clamped at 0; `lightmap.bounce.lobe_irradiance`)
-        under whatever radiance the scene shows at that time. Valid while the scene's
-        geometry and instances stay as they are. table_resolution: the plane table's (default:
-        the scene's)."""
+        under whatever radiance the scene shows at that time, and `BounceWeights.masks`, the
+        receivers' `visibility` masks from the same walk. Valid while the scene's geometry and
+        instances stay as they are. table_resolution: the plane table's (default: the
+        scene's)."""
         pts, norms = self._receivers(points, normals)
         resolution = None if table_resolution is None else int(table_resolution)
         native = self._native.bounce_weights(pts, norms, _checks.offset(offset), resolution, _checks.progress(progress))
@@ -256,6 +257,12 @@ class BounceWeights:
     def entries(self):
         """(vertex, weight) pairs stored over all receivers (8 bytes each)."""
         return self._native.entries
+
+    @property
+    def masks(self):
+        """The receivers' raw visibility masks (P, 16) uint64 from the same walk, as
+        `Scene.visibility` gives them."""
+        return self._native.masks
 
     def irradiance(self):
         """Irradiance / pi float32 (P, 3) along each receiver's normal, gathered from the

@@ -9,7 +9,7 @@
 //! normal (irradiance / pi, SH-filtered with A = pi, 2pi/3, pi/4), so both give the same
 //! values up to rounding.
 
-use crate::disk_mask::MASK_CELLS;
+use crate::disk_mask::{Mask, MASK_CELLS};
 use crate::error::{Error, Result};
 use crate::sh::{ShBasis, MAX_COEFFS};
 
@@ -19,6 +19,9 @@ use super::ordered::{DepthSink, Hit, Rgb};
 /// Row-compressed weights: receiver r's vertices and weights are the entries
 /// `rows[r]..rows[r + 1]`; a vertex is a slot, `first_slot[instance] + vertex id`.
 pub struct BounceWeights {
+    /// Each receiver's visibility mask from the same walk (covered cells, pinholes closed),
+    /// the one `Scene::visibility` gives: the bounce surfaces' direct light needs it too.
+    pub masks: Vec<Mask>,
     rows: Vec<usize>,
     slots: Vec<u32>,
     weights: Vec<f32>,
@@ -91,7 +94,9 @@ pub fn row(sink: &DepthSink, cell_weights: &[f32], first_slot: &[u32], scratch: 
 }
 
 impl BounceWeights {
-    pub fn new(rows: Vec<(Vec<u32>, Vec<f32>)>, first_slot: Vec<u32>) -> Self {
+    /// From each receiver's mask and row (`row`).
+    pub fn new(receivers: Vec<(Mask, (Vec<u32>, Vec<f32>))>, first_slot: Vec<u32>) -> Self {
+        let (masks, rows): (Vec<Mask>, Vec<_>) = receivers.into_iter().unzip();
         let mut offsets = Vec::with_capacity(rows.len() + 1);
         offsets.push(0);
         let total = rows.iter().map(|r| r.0.len()).sum();
@@ -101,7 +106,7 @@ impl BounceWeights {
             weights.extend(w);
             offsets.push(slots.len());
         }
-        BounceWeights { rows: offsets, slots, weights, first_slot }
+        BounceWeights { masks, rows: offsets, slots, weights, first_slot }
     }
 
     pub fn receivers(&self) -> usize {
@@ -160,7 +165,8 @@ mod tests {
     #[test]
     fn apply_weighs_each_instances_vertices() {
         let first = first_slots([2usize, 1].into_iter()).unwrap();
-        let w = BounceWeights::new(vec![(vec![0, 2], vec![0.5, 0.25]), (vec![], vec![]), (vec![1], vec![2.0])], first);
+        let rows = vec![(vec![0, 2], vec![0.5, 0.25]), (vec![], vec![]), (vec![1], vec![2.0])];
+        let w = BounceWeights::new(rows.into_iter().map(|r| (Mask::EMPTY, r)).collect(), first);
         let a: Vec<Rgb> = vec![[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]];
         let b: Vec<Rgb> = vec![[8.0, 8.0, 8.0]];
         let out = w.apply(&[Some(&a), Some(&b)], &[2, 1]).unwrap();

@@ -458,7 +458,8 @@ impl Scene {
 
     /// What `gather` (3 bands) then the lobe along each normal would give, recorded as weights
     /// on the vertices each receiver sees (`bounce_weights`), for bounce passes that change
-    /// only the radiance. `table_resolution`: the plane table's (default: the scene's).
+    /// only the radiance, with the receivers' `visibility` masks from the same walk.
+    /// `table_resolution`: the plane table's (default: the scene's).
     pub fn bounce_weights(&mut self, points: &[Vec3], normals: &[Vec3], offset: Option<f32>, table_resolution: Option<usize>, progress: Progress) -> Result<BounceWeights> {
         receivers::check(points, Some(normals))?;
         let offset = receivers::offset(offset, self.size())?;
@@ -469,14 +470,16 @@ impl Scene {
         let (trees, positions) = self.walk_parts();
         let walk = self.scene_walk(&trees, &positions);
         let black: Vec<Option<&[Rgb]>> = vec![None; self.instances.len()];
+        let full = disk();
         let rows = par_collect(points.len(), progress, || bounce_weights::Scratch::new(slots), |r, scratch| {
             let receiver = receivers::receiver(points[r], normals[r], offset);
             let mut hits = std::mem::take(&mut scratch.hits);
             let mut sink = DepthSink::recording(&table, &black, &mut hits);
             walk.run(&receiver, &mut scratch.stack, &mut sink);
             let row = bounce_weights::row(&sink, &cell_weights, &first_slot, scratch);
+            let mask = pinholes::close(&sink.covered(), &full, traverse::PINHOLE_NEIGHBOURS);
             scratch.hits = hits;
-            row
+            (mask, row)
         })?;
         Ok(BounceWeights::new(rows, first_slot))
     }

@@ -9,7 +9,8 @@
 use crate::disk_mask::{cell_direction, Mask, MASK_CELLS, MASK_SIDE};
 use crate::mesh::{sub, Vec3};
 use crate::plane_table::PlaneTable;
-use crate::rasterizer::{cross, dot, triangle_texels};
+use crate::packets::LANES;
+use crate::rasterizer::{cross, dot, edge_texels, LocalCorners};
 
 use super::traverse::{Sink, Tag};
 
@@ -24,11 +25,6 @@ pub type Rgb = [f32; 3];
 /// Relative depth difference under which two blockers count as coincident.
 const TIE: f32 = 1e-4;
 
-/// Triangles waiting for their masks: their texels are prefetched when they arrive and
-/// used this many triangles later, by when the lines are in cache (the 256 table is 48 MiB;
-/// fetched on demand, its reads were about half of a gather's time).
-const QUEUE: usize = 8;
-
 /// The nearest blocker of a cell, as `bounce_weights` records it: the instance, the corners'
 /// vertex ids and the cell direction's barycentric weights on them.
 #[derive(Clone, Copy, Default)]
@@ -38,14 +34,17 @@ pub struct Hit {
     pub weights: [f32; 3],
 }
 
-/// A triangle whose masks are on their way.
+/// A triangle whose texels are known and whose masks are on their way.
 #[derive(Clone, Copy)]
-struct Queued {
+struct Pending {
     corners: [Vec3; 3],
     ids: [u32; 3],
     tag: Tag,
     texels: [u32; 3],
 }
+
+const NO_TAG: Tag = Tag { mesh: 0, instance: 0, facing: 1.0 };
+const NO_PENDING: Pending = Pending { corners: [[0.0; 3]; 3], ids: [0; 3], tag: NO_TAG, texels: [0; 3] };
 
 pub struct DepthSink<'a> {
     table: &'a PlaneTable,
@@ -59,10 +58,16 @@ pub struct DepthSink<'a> {
     /// When recording, each covered cell's nearest blocker (cells not covered keep stale
     /// entries: read only where `depth` is finite).
     hits: Option<&'a mut [Hit]>,
-    /// A ring of triangles in arrival order: `queued` of them from `head` on.
-    queue: [Option<Queued>; QUEUE],
-    head: usize,
-    queued: usize,
+    /// Triangles in arrival order, a batch at a time: their texels are computed lane-parallel
+    /// when the batch is full (`edge_texels`, as the mask rasterizer does) and prefetched;
+    /// the batch before is drawn then, by when its masks are in cache (the 256 table is 48
+    /// MiB; one triangle at a time, texels and fetches were most of a gather's time).
+    batch: LocalCorners,
+    batch_ids: [[u32; 3]; LANES],
+    batch_tags: [Tag; LANES],
+    batch_len: usize,
+    pending: [Pending; LANES],
+    pending_len: usize,
 }
 
 impl<'a> DepthSink<'a> {
@@ -75,9 +80,12 @@ impl<'a> DepthSink<'a> {
             colour: [[0.0; 3]; MASK_CELLS],
             triangles: 0,
             hits: None,
-            queue: [None; QUEUE],
-            head: 0,
-            queued: 0,
+            batch: [[[0.0; LANES]; 3]; 3],
+            batch_ids: [[0; 3]; LANES],
+            batch_tags: [NO_TAG; LANES],
+            batch_len: 0,
+            pending: [NO_PENDING; LANES],
+            pending_len: 0,
         }
     }
 
@@ -105,36 +113,62 @@ impl<'a> DepthSink<'a> {
 }
 
 impl Sink for DepthSink<'_> {
-    /// Queues the triangle with its masks prefetched; draws the oldest when the queue is full.
-    /// Triangles are drawn in arrival order, so ties resolve as without the queue.
+    /// Queues the triangle; a full batch gets its texels and the batch before is drawn.
+    /// Triangles are drawn in arrival order, so ties resolve as one at a time.
     #[inline(always)]
     fn triangle(&mut self, a: Vec3, b: Vec3, c: Vec3, ids: [u32; 3], tag: Tag) {
-        let Some(texels) = triangle_texels(self.table, a, b, c) else { return };
-        texels.iter().for_each(|&t| self.table.prefetch(t));
-        if self.queued == QUEUE {
-            self.draw_oldest();
+        let i = self.batch_len;
+        for j in 0..3 {
+            self.batch[0][j][i] = a[j];
+            self.batch[1][j][i] = b[j];
+            self.batch[2][j][i] = c[j];
         }
-        self.queue[(self.head + self.queued) % QUEUE] = Some(Queued { corners: [a, b, c], ids, tag, texels });
-        self.queued += 1;
+        self.batch_ids[i] = ids;
+        self.batch_tags[i] = tag;
+        self.batch_len += 1;
+        if self.batch_len == LANES {
+            self.advance();
+        }
     }
 
     fn flush(&mut self) {
-        while self.queued > 0 {
-            self.draw_oldest();
-        }
+        self.advance();
+        self.draw_pending();
     }
 }
 
 impl DepthSink<'_> {
+    /// Texels of the queued batch, prefetched; draws the pending batch and makes this one pending.
     #[inline(always)]
-    fn draw_oldest(&mut self) {
-        let queued = self.queue[self.head].take();
-        self.head = (self.head + 1) % QUEUE;
-        self.queued -= 1;
-        if let Some(Queued { corners: [a, b, c], ids, tag, texels: [ab, bc, ca] }) = queued {
-            let t = self.table;
+    fn advance(&mut self) {
+        let mut texels = [[0u32; LANES]; 3];
+        let solid = edge_texels(self.table, &self.batch, &mut texels) & ((1u32 << self.batch_len) - 1);
+        let mut next = [NO_PENDING; LANES];
+        let mut next_len = 0;
+        let mut bits = solid;
+        while bits != 0 {
+            let i = bits.trailing_zeros() as usize;
+            bits &= bits - 1;
+            let t = [texels[0][i], texels[1][i], texels[2][i]];
+            t.iter().for_each(|&t| self.table.prefetch(t));
+            let corner = |k: usize| [self.batch[k][0][i], self.batch[k][1][i], self.batch[k][2][i]];
+            next[next_len] = Pending { corners: [corner(0), corner(1), corner(2)], ids: self.batch_ids[i], tag: self.batch_tags[i], texels: t };
+            next_len += 1;
+        }
+        self.batch_len = 0;
+        self.draw_pending();
+        self.pending = next;
+        self.pending_len = next_len;
+    }
+
+    #[inline(always)]
+    fn draw_pending(&mut self) {
+        let t = self.table;
+        for k in 0..self.pending_len {
+            let Pending { corners: [a, b, c], ids, tag, texels: [ab, bc, ca] } = self.pending[k];
             self.draw(Mask::and3(t.mask_at(ab), t.mask_at(bc), t.mask_at(ca)), a, b, c, ids, tag);
         }
+        self.pending_len = 0;
     }
 
     /// The per-cell depth test of a triangle covering `covered`.

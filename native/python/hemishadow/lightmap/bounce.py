@@ -23,29 +23,26 @@ def lobe_irradiance(gathered, lobes):
     return np.maximum(np.einsum("plk,pkc->plc", y, gathered) / np.float32(np.pi), 0.0).astype(np.float32)
 
 
-def vertex_radiance(scene, receivers, direct, bounces, offset=None, progress=None, steps=None):
+def vertex_radiance(scene, receivers, direct, bounces, offset=None, progress=None, steps=None, record=None):
     """Sets each surface's vertex radiance after `bounces` passes and returns it.
     steps: a `bake.Steps` given a step per vertex and pass, in chunks short enough for a
     cancel to get through (else `progress` goes to the engine).
 
     receivers: per surface (mesh_id, points (V, 3), normals (V, 3), usable (V,) bool, albedo
     (V, 3), emission (V, 3)); direct: per surface, the direct irradiance / pi (V, 3) at its
-    vertices.
-
-    Which surface a vertex sees in each direction is the same in every pass: the first pass
-    that has light to gather records it (`Scene.bounce_weights`) and every later pass reuses
-    it, unless the record would outgrow MAX_WEIGHT_ENTRIES; then each pass gathers anew.
+    vertices. record: their `VertexRecord`, made on the first pass with light to gather
+    when not given.
     """
     radiance = [emission.astype(np.float32) for (_, _, _, _, _, emission) in receivers]
-    usable = [r[3] for r in receivers]
-    points = np.concatenate([r[1][u] for r, u in zip(receivers, usable)]) if receivers else np.zeros((0, 3))
-    normals = np.concatenate([r[2][u] for r, u in zip(receivers, usable)]) if receivers else np.zeros((0, 3))
-    gather = _Gatherer(scene, points, normals, offset, progress, steps)
+    vertices = sum(int(r[3].sum()) for r in receivers)
     for _ in range(int(bounces)):
         _show(scene, receivers, radiance)
-        gathered = gather() if any(r.any() for r in radiance) and len(points) else None
-        if gathered is None and steps is not None:
-            steps.step(len(points))
+        gathered = None
+        if vertices and any(r.any() for r in radiance):
+            record = record or VertexRecord(scene, receivers, offset, progress, steps)
+            gathered = record.gathered()
+        elif steps is not None:
+            steps.step(vertices)
         new, first = [], 0
         for (mesh_id, _, _, ok, albedo, emission), d in zip(receivers, direct):
             light = d.copy()
@@ -62,48 +59,62 @@ def vertex_radiance(scene, receivers, direct, bounces, offset=None, progress=Non
 MAX_WEIGHT_ENTRIES = 1 << 27
 
 
-class _Gatherer:
-    """Irradiance / pi (V, 3) gathered at vertices along their normals under the radiance the
-    scene shows, from weights recorded on the first call (in chunks, each a progress step)."""
+class VertexRecord:
+    """The bounce surfaces' usable vertices and what one walk each sees from them
+    (`Scene.bounce_weights`): their visibility masks, for their direct light, and their
+    gather weights. Which surface a vertex sees in each direction is the same in every
+    pass, so every pass reuses the weights instead of walking the scene again; past
+    MAX_WEIGHT_ENTRIES they are dropped and each pass gathers anew. Recording steps
+    `steps` once per vertex, the first pass's share."""
 
-    def __init__(self, scene, points, normals, offset, progress, steps):
-        self.scene, self.points, self.normals, self.offset = scene, points, normals, offset
-        self.progress, self.steps = progress, steps
-        self.weights = None  # per chunk; False once the record outgrew MAX_WEIGHT_ENTRIES
+    def __init__(self, scene, receivers, offset=None, progress=None, steps=None):
+        self.scene, self.offset, self.progress, self.steps = scene, offset, progress, steps
+        self.counts = [int(r[3].sum()) for r in receivers]
+        self.points = np.concatenate([r[1][r[3]] for r in receivers]) if receivers else np.zeros((0, 3))
+        self.normals = np.concatenate([r[2][r[3]] for r in receivers]) if receivers else np.zeros((0, 3))
+        self.masks, self.weights = _record(scene, self.points, self.normals, offset, progress, steps)
+        self._stepped = True
 
-    def __call__(self):
-        """One pass: a progress step per vertex."""
+    def masks_of(self, surface):
+        """The masks (V_usable, 16) of one surface's usable vertices."""
+        first = sum(self.counts[:surface])
+        return self.masks[first:first + self.counts[surface]]
+
+    def gathered(self):
+        """Irradiance / pi (V_usable, 3) gathered along the normals under the radiance the
+        scene shows now: one pass, a progress step per vertex."""
         if self.weights is None:
-            self.weights = self._record()  # its chunks step the pass
-        elif self.weights is not False and self.steps is not None:
+            return _gathered(self.scene, self.points, self.normals, self.offset, self.progress, self.steps)
+        if self.steps is not None and not self._stepped:
             self.steps.step(len(self.points))
-        if self.weights is False:
-            return self._gathered()
-        return np.concatenate([w.irradiance() for _, w in self.weights])
+        self._stepped = False
+        return np.concatenate([w.irradiance() for w in self.weights]) if self.weights else np.zeros((0, 3), np.float32)
 
-    def _slices(self):
-        if self.steps is None:
-            return [slice(0, len(self.points))]
-        return self.steps.chunks(len(self.points), least=1024)
 
-    def _record(self):
-        weights, entries = [], 0
-        for s in self._slices():
-            w = self.scene.bounce_weights(self.points[s], self.normals[s], offset=self.offset,
-                                          progress=self.progress if self.steps is None else None)
-            weights.append((s, w))
-            entries += w.entries
-            if entries > MAX_WEIGHT_ENTRIES:
-                return False
-        return weights
+def _record(scene, points, normals, offset, progress, steps):
+    """Masks (V, 16) and `Scene.bounce_weights` per chunk (None past MAX_WEIGHT_ENTRIES)."""
+    masks = np.zeros((len(points), 16), np.uint64)
+    weights, entries = [], 0
+    for s in _slices(len(points), steps):
+        w = scene.bounce_weights(points[s], normals[s], offset=offset, progress=progress if steps is None else None)
+        masks[s] = w.masks
+        entries += w.entries
+        weights = None if weights is None or entries > MAX_WEIGHT_ENTRIES else weights + [w]
+    return masks, weights
 
-    def _gathered(self):
-        out = np.empty((len(self.points), 3), np.float32)
-        for s in self._slices():
-            g = self.scene.gather(self.points[s], self.normals[s], bands=BANDS, offset=self.offset,
-                                  progress=self.progress if self.steps is None else None)
-            out[s] = lobe_irradiance(g, self.normals[s][:, None])[:, 0]
-        return out
+
+def _slices(count, steps):
+    """Chunks of the vertices, each a progress step (one slice without `steps`)."""
+    return [slice(0, count)] if steps is None else steps.chunks(count, least=1024)
+
+
+def _gathered(scene, points, normals, offset, progress, steps):
+    """Irradiance / pi (V, 3) gathered anew (`Scene.gather`, 3 bands) along the normals."""
+    out = np.empty((len(points), 3), np.float32)
+    for s in _slices(len(points), steps):
+        g = scene.gather(points[s], normals[s], bands=BANDS, offset=offset, progress=progress if steps is None else None)
+        out[s] = lobe_irradiance(g, normals[s][:, None])[:, 0]
+    return out
 
 
 def _show(scene, receivers, radiance):

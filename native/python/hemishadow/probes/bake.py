@@ -10,7 +10,8 @@ adds `grid_matrix` (4, 4) and `grid_resolution` (3,). See docs/probes.md.
 
 import numpy as np
 
-from ..lightmap.bake import Steps, bounce_receivers, direct_light, emitters, checked_lighting, positive_int, checked_suns
+from ..lightmap.bake import (Steps, bounce_receivers, checked_lighting, checked_suns, emitters, positive_int,
+                              vertex_bounce)
 from ..lightmap import bounce, cells, lamps as lamp_models, texels
 from . import baked, capture, grid, validity
 from .cube import sh_to_cube
@@ -132,29 +133,16 @@ def _bounce(scene, receivers, points, lighting, suns, lamps, bounces, offset, st
         radiance = [fixed[r[0]] for r in receivers]
         for (mesh_id, *_), rgb in zip(receivers, radiance):
             scene.set_radiance(mesh_id, rgb)
+        steps.step(sum(len(r[1]) for r in receivers) * (1 + bounces))  # the passes' share
     else:
-        radiance = _computed(scene, receivers, lighting, suns, lamps, bounces, offset, steps)
+        radiance = vertex_bounce(scene, receivers, lighting, suns, lamps, bounces, offset, steps)
         for i, (mesh_id, *_) in enumerate(receivers):
             if mesh_id in fixed:
                 radiance[i] = fixed[mesh_id]
                 scene.set_radiance(mesh_id, radiance[i])
-    steps.step(sum(len(r[1]) for r in receivers) * bounces)
     if not any(r.any() for r in radiance):
         return None
     return scene.gather(points, None, bands=GATHER_BANDS, offset=offset).astype(np.float64)
-
-
-def _computed(scene, receivers, lighting, suns, lamps, bounces, offset, steps):
-    """Vertex radiance per surface after `bounces` passes, shown to `Scene.gather`."""
-    direct = []
-    for mesh_id, pts, nrm, ok, _, _ in receivers:
-        d = np.zeros((len(pts), 3), np.float32)
-        if ok.any() and bounces:  # with no pass, surfaces show their emission only
-            d[ok] = direct_light(scene, pts[ok], nrm[ok], nrm[ok][:, None], lighting, suns,
-                                 np.zeros(ok.sum(), np.int64), texels.offsets(1), False, offset, steps,
-                                 exact_suns=False, lamps=lamps, lamp_points=1)[0][:, 0]
-        direct.append(d)
-    return bounce.vertex_radiance(scene, receivers, direct, bounces, offset)
 
 
 def _fill_invalid(points, cube, sh9, valid):
