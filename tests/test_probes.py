@@ -207,6 +207,18 @@ def test_invalid_probes_in_a_closed_box_and_in_a_wall():
     assert plain["valid"].sum() < out["valid"].sum()
 
 
+def test_a_probe_closed_in_by_a_box_without_bottom_and_the_floor_is_invalid():
+    """Most of what the probe sees are back faces (the box's walls and roof from inside),
+    though the floor below it faces it: invalid. Beside the box, over the same floor: valid."""
+    v, t = box([-0.5, -0.5, 0.0], [0.5, 0.5, 1.0])
+    t = t[~np.all(np.isclose(v[t][:, :, 2], 0.0), axis=1)]    # no bottom face
+    floor = box([-4.0, -4.0, -0.1], [4.0, 4.0, 0.0])
+    scene, _ = scene_of((v, t), floor)
+    for height in (0.1, 0.5, 0.9):
+        out = hp.bake(scene, [[0.0, 0.0, height], [2.0, 0.0, height]], lighting=sky_sh(3, 5))
+        assert list(out["valid"]) == [False, True], height
+
+
 # --- evaluation without leaks ------------------------------------------------------------------
 
 

@@ -270,6 +270,36 @@ impl PyScene {
         Ok(Array1::from_vec(hit).into_pyarray(py))
     }
 
+    /// `gather`, with each walked hemisphere's mask (P, H, 16) and back-face fraction (P, H).
+    #[pyo3(signature = (points, normals, bands, offset, progress=None))]
+    #[allow(clippy::type_complexity)]
+    fn gather_views<'py>(
+        &mut self,
+        py: Python<'py>,
+        points: PyReadonlyArray2<f32>,
+        normals: Option<PyReadonlyArray2<f32>>,
+        bands: usize,
+        offset: Option<f32>,
+        progress: Option<Py<PyAny>>,
+    ) -> PyResult<(Bound<'py, PyArray3<f32>>, Bound<'py, PyArray3<u64>>, Bound<'py, PyArray2<f32>>)> {
+        let p = rows3(&points, "points")?;
+        let n = normals.map(|n| rows3(&n, "normals")).transpose()?;
+        let hemispheres = if n.is_some() { 1 } else { 2 };
+        let inner = &mut self.inner;
+        let mut reporter = PyProgress::new(progress);
+        let report = &mut reporter;
+        let result = run(py, || inner.gather_views(&p, n.as_deref(), bands, offset, &mut |f| report.report(f)));
+        let (values, views) = reporter.finish(result)?;
+        let words = engine::disk_mask::MASK_WORDS;
+        let masks: Vec<u64> = views.iter().flat_map(|(m, _)| m.0).collect();
+        let back: Vec<f32> = views.iter().map(|(_, b)| *b).collect();
+        Ok((
+            Array3::from_shape_vec((p.len(), bands * bands, 3), values).expect("P x k x 3").into_pyarray(py),
+            Array3::from_shape_vec((p.len(), hemispheres, words), masks).expect("P x H x words").into_pyarray(py),
+            Array2::from_shape_vec((p.len(), hemispheres), back).expect("P x H").into_pyarray(py),
+        ))
+    }
+
     #[pyo3(signature = (points, normals, offset, table_resolution=None, progress=None))]
     fn bounce_weights(
         &mut self,

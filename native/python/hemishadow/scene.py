@@ -213,6 +213,18 @@ class Scene:
         return self._native.gather(pts, norms, _checks.band_count(bands), _checks.offset(offset),
                                    _checks.progress(progress))
 
+    def gather_views(self, points, normals=None, *, bands=3, offset=None, progress=None):
+        """`gather`, with what the same walks say of each hemisphere walked (the normal's, or
+        +Z then -Z without normals, H = 1 or 2): (SH (P, bands^2, 3), masks (H, P, 16) uint64
+        as `visibility` gives them, back (H, P) float32: the fraction of the disk's cells whose
+        nearest blocker shows its back, which `valid` allows up to one half). Probes take
+        their masks and validity from their gather's walks."""
+        pts = _checks.points(points, "points")
+        norms = None if normals is None else _normals(normals, len(pts))
+        sh, masks, back = self._native.gather_views(pts, norms, _checks.band_count(bands), _checks.offset(offset),
+                                                    _checks.progress(progress))
+        return sh, np.ascontiguousarray(masks.transpose(1, 0, 2)), np.ascontiguousarray(back.T)
+
     def bounce_weights(self, points, normals, *, offset=None, table_resolution=None, progress=None):
         """Records, per receiver, the weight of every vertex it sees in `gather`'s ordered mode,
         so that bounce passes, which change only the radiance, need no walk through the scene:

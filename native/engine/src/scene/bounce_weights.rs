@@ -40,8 +40,14 @@ pub fn first_slots(vertex_counts: impl Iterator<Item = usize>) -> Result<Vec<u32
 }
 
 /// Per cell, the irradiance / pi along the receiver's normal (its local +Z) that unit
-/// radiance over the cell gives, filtered through 3 SH bands as `gather` + lobe evaluation.
-pub fn normal_cell_weights() -> Vec<f32> {
+/// radiance over the cell gives, filtered through 3 SH bands as `gather` + lobe evaluation
+/// (computed once: a few milliseconds, which every call paid).
+pub fn normal_cell_weights() -> &'static [f32] {
+    static WEIGHTS: std::sync::OnceLock<Vec<f32>> = std::sync::OnceLock::new();
+    WEIGHTS.get_or_init(cell_weights_along_z)
+}
+
+fn cell_weights_along_z() -> Vec<f32> {
     let basis = ShBasis::new(3).expect("3 bands");
     let projector = Projector::new(basis.clone());
     let mut y = [0.0f32; MAX_COEFFS];

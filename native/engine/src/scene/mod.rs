@@ -402,10 +402,8 @@ impl Scene {
     /// Cheaper than both calls where most receivers need the validity (closed rooms).
     pub fn visibility_valid(&mut self, points: &[Vec3], normals: &[Vec3], offset: Option<f32>) -> Result<(Vec<Mask>, Vec<bool>)> {
         let full = disk();
-        let both = self.depth_buffers(points, normals, offset, |sink| {
-            (pinholes::close(&sink.covered(), &full, traverse::PINHOLE_NEIGHBOURS), receivers::is_valid(&sink.back))
-        })?;
-        Ok(both.into_iter().unzip())
+        let both = self.depth_buffers(points, normals, offset, |sink| hemisphere_view(sink, &full))?;
+        Ok(both.into_iter().map(|(mask, back)| (mask, back <= receivers::BACK_FACE_LIMIT)).unzip())
     }
 
     /// `read` of each receiver's depth buffer (the ordered mode without radiance).
@@ -432,6 +430,12 @@ impl Scene {
     /// radiance of the nearest blocker in every direction, over the receiver's hemisphere, or
     /// over the whole sphere when `normals` is None.
     pub fn gather(&mut self, points: &[Vec3], normals: Option<&[Vec3]>, bands: usize, offset: Option<f32>, progress: Progress) -> Result<Vec<f32>> {
+        Ok(self.gather_views(points, normals, bands, offset, progress)?.0)
+    }
+
+    /// `gather`, with each walked hemisphere's view (its normal's, or +Z then -Z without
+    /// normals; receiver-major): probes get their masks and validity from the same walks.
+    pub fn gather_views(&mut self, points: &[Vec3], normals: Option<&[Vec3]>, bands: usize, offset: Option<f32>, progress: Progress) -> Result<(Vec<f32>, Vec<HemisphereView>)> {
         receivers::check(points, normals)?;
         let projector = gather::Projector::new(ShBasis::new(bands)?);
         let offset = receivers::offset(offset, self.size())?;
@@ -440,20 +444,27 @@ impl Scene {
         let walk = self.scene_walk(&trees, &positions);
         let radiance = self.radiance_by_instance();
         let k = projector.coeffs();
-        let mut out = vec![0.0f32; points.len() * k * 3];
-        par_rows(&mut out, k * 3, progress, Vec::new, |r, scratch, row| {
+        let full = disk();
+        let rows = par_collect(points.len(), progress, Vec::new, |r, scratch| {
             let hemispheres: &[Vec3] = match normals {
                 Some(n) => std::slice::from_ref(&n[r]),
                 None => &[[0.0, 0.0, 1.0], [0.0, 0.0, -1.0]],
             };
-            for n in hemispheres {
-                let receiver = receivers::receiver(points[r], *n, offset);
-                let mut sink = DepthSink::new(&table, &radiance);
-                walk.run(&receiver, scratch, &mut sink);
-                projector.add(&sink, &receiver, row);
-            }
+            let mut row = vec![0.0f32; k * 3];
+            let views: Vec<HemisphereView> = hemispheres
+                .iter()
+                .map(|n| {
+                    let receiver = receivers::receiver(points[r], *n, offset);
+                    let mut sink = DepthSink::new(&table, &radiance);
+                    walk.run(&receiver, scratch, &mut sink);
+                    projector.add(&sink, &receiver, &mut row);
+                    hemisphere_view(&sink, &full)
+                })
+                .collect();
+            (row, views)
         })?;
-        Ok(out)
+        let (rows, views): (Vec<Vec<f32>>, Vec<Vec<HemisphereView>>) = rows.into_iter().unzip();
+        Ok((rows.concat(), views.concat()))
     }
 
     /// What `gather` (3 bands) then the lobe along each normal would give, recorded as weights
@@ -476,7 +487,7 @@ impl Scene {
             let mut hits = std::mem::take(&mut scratch.hits);
             let mut sink = DepthSink::recording(&table, &black, &mut hits);
             walk.run(&receiver, &mut scratch.stack, &mut sink);
-            let row = bounce_weights::row(&sink, &cell_weights, &first_slot, scratch);
+            let row = bounce_weights::row(&sink, cell_weights, &first_slot, scratch);
             let mask = pinholes::close(&sink.covered(), &full, traverse::PINHOLE_NEIGHBOURS);
             scratch.hits = hits;
             (mask, row)
@@ -493,6 +504,15 @@ impl Scene {
     fn instance_vertex_counts(&self) -> Vec<usize> {
         self.instances.iter().map(|(m, _)| self.meshes[*m as usize].positions.len()).collect()
     }
+}
+
+/// What a receiver's depth buffer says of its hemisphere: the visibility mask (covered
+/// cells, pinholes closed as `visibility` closes them) and the fraction of its cells that
+/// show back faces (`valid` when at most receivers::BACK_FACE_LIMIT).
+pub type HemisphereView = (Mask, f32);
+
+fn hemisphere_view(sink: &DepthSink, full: &Mask) -> HemisphereView {
+    (pinholes::close(&sink.covered(), full, traverse::PINHOLE_NEIGHBOURS), receivers::back_fraction(&sink.back))
 }
 
 /// Scene receivers see large blockers near their horizon (floors, walls) far more often than

@@ -49,7 +49,12 @@ pub fn receiver(point: Vec3, normal: Vec3, offset: f32) -> Receiver {
 
 /// Whether the back faces seen are at most BACK_FACE_LIMIT of the hemisphere.
 pub fn is_valid(back: &crate::disk_mask::Mask) -> bool {
+    back_fraction(back) <= BACK_FACE_LIMIT
+}
+
+/// The fraction of the disk's cells whose nearest blocker shows its back.
+pub fn back_fraction(back: &crate::disk_mask::Mask) -> f32 {
     let cells = disk().count() as f32;
     debug_assert!(cells as usize <= MASK_CELLS);
-    (back.count() as f32) <= BACK_FACE_LIMIT * cells
+    back.count() as f32 / cells
 }

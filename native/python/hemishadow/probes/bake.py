@@ -75,13 +75,23 @@ def bake(scene, points, *, lighting=None, suns=(), lamps=(), surfaces=(), bounce
     receivers = bounce_receivers([], surfaces) if surfaces and (bounces or emits) else []
     steps = Steps(progress, 3 * len(pts) + sum(len(r[1]) for r in receivers) * (1 + bounces), "probe bake")
 
-    masks = capture.masks(scene, pts, offset)
-    valid = validity.check(scene, pts, masks, offset)
+    lightmapped, bands = [], None
+    if receivers:  # what the surfaces show does not depend on the probes: it comes first
+        fixed = baked.radiance(receivers, lightmaps) if bounces else {}
+        lightmapped = sorted(fixed)
+        if _show_surfaces(scene, receivers, lighting, suns, lamps, bounces, offset, steps, fixed):
+            bands = GATHER_BANDS
+    seen = capture.views(scene, pts, offset, bands)
+    masks, gathered = seen.masks, seen.gathered
+    valid = validity.check(seen.back)
     moved = np.zeros(len(pts), bool)
     if cell is not None and not valid.all():
         pts, moved = validity.relocate(scene, pts, valid, cell, offset)
         if moved.any():
-            masks[:, moved] = capture.masks(scene, pts[moved], offset)
+            again = capture.views(scene, pts[moved], offset, bands)
+            masks[:, moved] = again.masks
+            if gathered is not None:
+                gathered[moved] = again.gathered
             valid[moved] = True
     steps.step(len(pts))
 
@@ -100,14 +110,9 @@ def bake(scene, points, *, lighting=None, suns=(), lamps=(), surfaces=(), bounce
         sh9 += s
         steps.step(0)  # lets a cancel through between lamps
     steps.step(len(pts))
-    lightmapped = []
-    if receivers:
-        fixed = baked.radiance(receivers, lightmaps) if bounces else {}
-        lightmapped = sorted(fixed)
-        gathered = _bounce(scene, receivers, pts, lighting, suns, lamps, bounces, offset, steps, fixed)
-        if gathered is not None:
-            cube += np.maximum(sh_to_cube(gathered), 0.0)
-            sh9 += gathered[:, :9]
+    if gathered is not None:
+        cube += np.maximum(sh_to_cube(gathered), 0.0)
+        sh9 += gathered[:, :9]
     steps.step(len(pts))
     cube, sh9 = _fill_invalid(pts, cube, sh9, valid)
     return {"positions": pts.astype(np.float32), "cube": cube.astype(np.float32), "sh9": sh9.astype(np.float32),
@@ -124,11 +129,11 @@ def bake_grid(scene, matrix, resolution, **kwargs):
     return out
 
 
-def _bounce(scene, receivers, points, lighting, suns, lamps, bounces, offset, steps, fixed):
-    """SH25 (P, 25, 3) of the light arriving from the surfaces after `bounces` passes (the
-    lightmap baker's vertex receivers and `bounce.vertex_radiance`), gathered over the whole
-    sphere; surfaces in `fixed` ({mesh_id: radiance (V, 3)}, from their lightmaps) show that
-    instead. None when every surface stays black."""
+def _show_surfaces(scene, receivers, lighting, suns, lamps, bounces, offset, steps, fixed):
+    """Shows each surface's radiance to the scene for the probes' gather: after `bounces`
+    passes (the lightmap baker's vertex receivers, `vertex_bounce`), or for surfaces in
+    `fixed` ({mesh_id: radiance (V, 3)}, from their lightmaps) that instead. False when
+    every surface stays black."""
     if len(fixed) == len(receivers):
         radiance = [fixed[r[0]] for r in receivers]
         for (mesh_id, *_), rgb in zip(receivers, radiance):
@@ -140,9 +145,7 @@ def _bounce(scene, receivers, points, lighting, suns, lamps, bounces, offset, st
             if mesh_id in fixed:
                 radiance[i] = fixed[mesh_id]
                 scene.set_radiance(mesh_id, radiance[i])
-    if not any(r.any() for r in radiance):
-        return None
-    return scene.gather(points, None, bands=GATHER_BANDS, offset=offset).astype(np.float64)
+    return any(r.any() for r in radiance)
 
 
 def _fill_invalid(points, cube, sh9, valid):

@@ -12,6 +12,7 @@ the part of its solid angle inside that face (fine quadrature, once) and the rad
 sample direction. The six frames are fixed, so all of this is per cell, not per probe.
 """
 
+import collections
 import functools
 
 import numpy as np
@@ -82,10 +83,25 @@ def _side_weights():
     return cells.lobe_weights(np.array([0.0, 0.0, 1.0]))
 
 
-def masks(scene, points, offset=None):
-    """Raw masks (6, P, 16) of the six hemispheres of each point."""
-    return np.stack([scene.visibility(points, np.broadcast_to(AXES[j], points.shape), offset=offset)
-                     for j in range(6)])
+Views = collections.namedtuple("Views", "masks back gathered")
+
+
+def views(scene, points, offset=None, bands=None, sides=True):
+    """What each probe sees, one walk per hemisphere: `masks` (6, P, 16), the raw masks of
+    its six hemispheres (+Z and -Z only, (2, P, 16), without `sides`); `back` (2, P), the
+    fraction of the +Z and -Z hemispheres' cells whose nearest blocker shows its back
+    (`validity`); `gathered` (P, bands^2, 3), with `bands`, the SH projection over the whole
+    sphere of the radiance the scene's surfaces show (`Scene.gather`), else None. +Z and -Z
+    come from the gather's ordered walks (`Scene.gather_views`), the four sides from plain
+    mask walks (`Scene.visibility`)."""
+    sh, z_masks, back = scene.gather_views(points, None, bands=bands or 1, offset=offset)
+    if not sides:
+        return Views(z_masks, back, None)
+    masks = np.empty((6, len(points), 16), np.uint64)
+    for j in range(4):
+        masks[j] = scene.visibility(points, np.broadcast_to(AXES[j], points.shape), offset=offset)
+    masks[4:] = z_masks  # AXES[4], AXES[5] = +Z, -Z: the gather's hemispheres
+    return Views(masks, back, sh.astype(np.float64) if bands else None)
 
 
 def environment(open_cells, lighting):

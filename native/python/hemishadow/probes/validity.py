@@ -1,8 +1,9 @@
 """Invalid probes: inside walls or objects, where most of what a probe sees are back faces.
 
-A probe is invalid when `Scene.valid` rejects at least 3 of its 6 hemispheres (back faces
-over more than half of each; asked only where a mask is more than 45 % blocked, as the
-lightmap baker does). An invalid probe with a cell size moves to the nearest valid position
+A probe is invalid when the nearest blockers of more than half of its sphere show their
+backs: the mean over its +Z and -Z hemispheres of the fraction of cells that do
+(`capture.views`, from the walks of its gather; each cell is an equal share of its disk).
+An invalid probe with a cell size moves to the nearest valid position
 among offsets of a quarter and half a cell towards its 26 neighbours (within half a cell on
 every axis, nearest first); where none is valid it stays, marked invalid.
 """
@@ -11,29 +12,16 @@ import itertools
 
 import numpy as np
 
-from ..lightmap.bake import hemisphere_valid
 from . import capture
-from .cube import AXES
 
-MIN_BAD_HEMISPHERES = 3
+BACK_FACE_LIMIT = 0.5  # of the sphere, as `Scene.valid` allows of a hemisphere
 _STEPS = (0.25, 0.5)
 
 
-def check(scene, points, masks, offset=None):
-    """bool (P,): True for valid probes, given their six masks (6, P, 16). Hemispheres are
-    asked in turn and a probe stops being asked once decided (3 bad, or 4 good): inside dense
-    geometry `Scene.valid` costs about a millisecond a query."""
-    bad = np.zeros(len(points), np.int64)
-    good = np.zeros(len(points), np.int64)
-    for j in range(6):
-        todo = np.flatnonzero((bad < MIN_BAD_HEMISPHERES) & (good <= 6 - MIN_BAD_HEMISPHERES))
-        if not len(todo):
-            break
-        normals = np.broadcast_to(AXES[j], (len(todo), 3))
-        ok = hemisphere_valid(scene, points[todo], normals, masks[j][todo], offset)
-        bad[todo] += ~ok
-        good[todo] += ok
-    return bad < MIN_BAD_HEMISPHERES
+def check(back):
+    """bool (P,): True for valid probes, given the back-face fractions (2, P) of their +Z and
+    -Z hemispheres (`capture.views`)."""
+    return back.mean(axis=0) <= BACK_FACE_LIMIT
 
 
 def _offsets(cell):
@@ -61,7 +49,7 @@ def relocate(scene, points, valid, cell, offset=None):
             break
         shell = offsets[lengths == length]
         trial = (points[todo][:, None] + shell[None]).reshape(-1, 3)
-        ok = check(scene, trial, capture.masks(scene, trial, offset), offset).reshape(len(todo), len(shell))
+        ok = check(capture.views(scene, trial, offset, sides=False).back).reshape(len(todo), len(shell))
         found = ok.any(axis=1)
         first = np.argmax(ok, axis=1)
         points[todo[found]] += shell[first[found]]
