@@ -43,6 +43,18 @@ struct Pending {
     texels: [u32; 3],
 }
 
+/// A triangle that won some cell: what its barycentric weights need.
+#[derive(Clone, Copy)]
+struct Winner {
+    a: Vec3,
+    e1: Vec3,
+    e2: Vec3,
+    normal: Vec3,
+    nn: f32,
+    ids: [u32; 3],
+    instance: u32,
+}
+
 const NO_TAG: Tag = Tag { mesh: 0, instance: 0, facing: 1.0 };
 const NO_PENDING: Pending = Pending { corners: [[0.0; 3]; 3], ids: [0; 3], tag: NO_TAG, texels: [0; 3] };
 
@@ -58,6 +70,13 @@ pub struct DepthSink<'a> {
     /// When recording, each covered cell's nearest blocker (cells not covered keep stale
     /// entries: read only where `depth` is finite).
     hits: Option<&'a mut [Hit]>,
+    /// Triangles that won a cell, and per cell the index of its winner: barycentric weights
+    /// (colour, hits) are taken once per cell in `resolve`, not at every win (a cell is won
+    /// a few times over as nearer blockers arrive).
+    winners: Vec<Winner>,
+    winner: [u32; MASK_CELLS],
+    /// Whether anything reads colours or hits (else depth and facing are all there is).
+    resolves: bool,
     /// Triangles in arrival order, a batch at a time: their texels are computed lane-parallel
     /// when the batch is full (`edge_texels`, as the mask rasterizer does) and prefetched;
     /// the batch before is drawn then, by when its masks are in cache (the 256 table is 48
@@ -80,6 +99,9 @@ impl<'a> DepthSink<'a> {
             colour: [[0.0; 3]; MASK_CELLS],
             triangles: 0,
             hits: None,
+            winners: Vec::new(),
+            winner: [0; MASK_CELLS],
+            resolves: radiance.iter().any(Option::is_some),
             batch: [[[0.0; LANES]; 3]; 3],
             batch_ids: [[0; 3]; LANES],
             batch_tags: [NO_TAG; LANES],
@@ -92,7 +114,7 @@ impl<'a> DepthSink<'a> {
     /// A sink that also records each cell's nearest blocker into `hits` (MASK_CELLS long).
     pub fn recording(table: &'a PlaneTable, radiance: &'a [Option<&'a [Rgb]>], hits: &'a mut [Hit]) -> Self {
         assert_eq!(hits.len(), MASK_CELLS);
-        DepthSink { hits: Some(hits), ..DepthSink::new(table, radiance) }
+        DepthSink { hits: Some(hits), resolves: true, ..DepthSink::new(table, radiance) }
     }
 
     /// The recorded nearest blocker of a covered cell.
@@ -134,6 +156,7 @@ impl Sink for DepthSink<'_> {
     fn flush(&mut self) {
         self.advance();
         self.draw_pending();
+        self.resolve();
     }
 }
 
@@ -180,7 +203,8 @@ impl DepthSink<'_> {
         let (nn, na) = (dot(normal, normal), dot(normal, a));
         // Receiver at the origin: it sees the winding's back when the plane's normal points away.
         let back = tag.facing * na > 0.0;
-        let corners = self.radiance[tag.instance as usize].map(|r| ids.map(|v| r[v as usize]));
+        let index = self.winners.len() as u32;
+        let mut won = false;
         let directions = cell_directions();
         for (w, &word) in covered.0.iter().enumerate() {
             let mut bits = word;
@@ -198,17 +222,46 @@ impl DepthSink<'_> {
                 self.depth[cell] = t;
                 let bit = 1u64 << (cell % 64);
                 self.back.0[w] = if back { self.back.0[w] | bit } else { self.back.0[w] & !bit };
-                if corners.is_none() && self.hits.is_none() {
-                    continue;
+                self.winner[cell] = index;
+                won = true;
+            }
+        }
+        if won && self.resolves {
+            self.winners.push(Winner { a, e1, e2, normal, nn, ids, instance: tag.instance });
+        }
+    }
+
+    /// Colour (and hits) of every covered cell from its winner, once the walk is over: the
+    /// radiance interpolated barycentrically at the cell's direction on its nearest blocker
+    /// (black when that blocker's instance shows none).
+    fn resolve(&mut self) {
+        if !self.resolves {
+            return;
+        }
+        let directions = cell_directions();
+        for cell in 0..MASK_CELLS {
+            let t = self.depth[cell];
+            if !t.is_finite() {
+                continue;
+            }
+            let w = self.winners[self.winner[cell] as usize];
+            let radiance = self.radiance[w.instance as usize];
+            if radiance.is_none() && self.hits.is_none() {
+                self.colour[cell] = [0.0; 3];
+                continue;
+            }
+            let d = directions[cell];
+            let q = sub([d[0] * t, d[1] * t, d[2] * t], w.a);
+            let [alpha, beta, gamma] = barycentric(q, w.e1, w.e2, w.normal, w.nn);
+            self.colour[cell] = match radiance {
+                Some(r) => {
+                    let [ra, rb, rc] = w.ids.map(|v| r[v as usize]);
+                    [0, 1, 2].map(|k| alpha * ra[k] + beta * rb[k] + gamma * rc[k])
                 }
-                let q = sub([d[0] * t, d[1] * t, d[2] * t], a);
-                let [alpha, beta, gamma] = barycentric(q, e1, e2, normal, nn);
-                if let Some([ra, rb, rc]) = corners {
-                    self.colour[cell] = [0, 1, 2].map(|k| alpha * ra[k] + beta * rb[k] + gamma * rc[k]);
-                }
-                if let Some(hits) = self.hits.as_deref_mut() {
-                    hits[cell] = Hit { instance: tag.instance, ids, weights: [alpha, beta, gamma] };
-                }
+                None => [0.0; 3],
+            };
+            if let Some(hits) = self.hits.as_deref_mut() {
+                hits[cell] = Hit { instance: w.instance, ids: w.ids, weights: [alpha, beta, gamma] };
             }
         }
     }
@@ -254,6 +307,23 @@ mod tests {
             assert!((sink.depth[zenith] - 1.0).abs() < 0.01, "{}", sink.depth[zenith]);
             assert_eq!(sink.colour[zenith], [1.0, 0.0, 0.0]);
         }
+    }
+
+    #[test]
+    fn a_nearer_blocker_without_radiance_hides_a_glowing_one() {
+        let t = table();
+        let glow: Vec<Rgb> = vec![[1.0, 1.0, 1.0]; 3];
+        let meshes = [None, Some(glow.as_slice())];
+        let mut sink = DepthSink::new(&t, &meshes);
+        let far = Tag { mesh: 1, instance: 1, facing: 1.0 };
+        sink.triangle([-50.0, -50.0, 2.0], [50.0, -50.0, 2.0], [0.0, 50.0, 2.0], [0, 1, 2], far);
+        sink.triangle([-5.0, -5.0, 1.0], [5.0, -5.0, 1.0], [0.0, 5.0, 1.0], [0, 1, 2], TAG);
+        sink.flush();
+        let zenith = 16 * MASK_SIDE + 16;
+        assert!((sink.depth[zenith] - 1.0).abs() < 0.01);
+        assert_eq!(sink.colour[zenith], [0.0; 3]); // black, not the farther glow
+        let rim = (0..MASK_CELLS).find(|&c| sink.depth[c] > 1.5 && sink.depth[c].is_finite()).expect("a cell sees the far one");
+        assert_eq!(sink.colour[rim], [1.0; 3]);
     }
 
     #[test]
