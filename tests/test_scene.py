@@ -362,9 +362,17 @@ def test_bounce_weights_give_the_gather_under_any_radiance():
         assert got.shape == (300, 3) and got.dtype == np.float32
         np.testing.assert_allclose(got, expected, atol=2e-5 * expected.max())
         assert (expected > 0.01).mean() > 0.5  # most receivers see something lit
-    scene.add_instance(1, y_up(1.0, (-0.6, -0.5, 0.74)))
+    spot = world.meshes[1][0]
+    scene.set_vertices(1, spot + [0.0, 0.0, 0.05])               # the same vertex count, moved
     with pytest.raises(ValueError, match="changed since these bounce weights"):
         weights.irradiance()
+    again = scene.bounce_weights(points, normals)
+    scene.add_instance(1, y_up(1.0, (-0.6, -0.5, 0.74)))
+    with pytest.raises(ValueError, match="changed since these bounce weights"):
+        again.irradiance()
+    other = world.engine(hemishadow).bounce_weights(points, normals)
+    with pytest.raises(ValueError, match="another scene"):                # the engine's guard
+        scene._native.apply_bounce_weights(other._native)
 
 
 def test_bounce_passes_agree_with_and_without_recorded_weights(monkeypatch):

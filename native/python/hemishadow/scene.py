@@ -231,9 +231,9 @@ class Scene:
         `BounceWeights.irradiance()` then equals `gather(points, normals, bands=3)` evaluated
         along each normal (irradiance / pi, clamped at 0; `lightmap.bounce.lobe_irradiance`)
         under whatever radiance the scene shows at that time, and `BounceWeights.masks`, the
-        receivers' `visibility` masks from the same walk. Valid while the scene's geometry and
-        instances stay as they are. table_resolution: the plane table's (default: the
-        scene's)."""
+        receivers' `visibility` masks from the same walk. Once the scene's geometry or
+        instances change, `irradiance()` raises ValueError (what the receivers see may have
+        changed). table_resolution: the plane table's (default: the scene's)."""
         pts, norms = self._receivers(points, normals)
         resolution = None if table_resolution is None else int(table_resolution)
         native = self._native.bounce_weights(pts, norms, _checks.offset(offset), resolution, _checks.progress(progress))

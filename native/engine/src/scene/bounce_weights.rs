@@ -26,6 +26,8 @@ pub struct BounceWeights {
     slots: Vec<u32>,
     weights: Vec<f32>,
     first_slot: Vec<u32>,
+    /// The scene's instance stamps when recorded: any change to its blockers renews one.
+    stamps: Vec<u64>,
 }
 
 /// The vertex slot of each instance's first vertex, and the total after the last.
@@ -101,7 +103,7 @@ pub fn row(sink: &DepthSink, cell_weights: &[f32], first_slot: &[u32], scratch: 
 
 impl BounceWeights {
     /// From each receiver's mask and row (`row`).
-    pub fn new(receivers: Vec<(Mask, (Vec<u32>, Vec<f32>))>, first_slot: Vec<u32>) -> Self {
+    pub fn new(receivers: Vec<(Mask, (Vec<u32>, Vec<f32>))>, first_slot: Vec<u32>, stamps: Vec<u64>) -> Self {
         let (masks, rows): (Vec<Mask>, Vec<_>) = receivers.into_iter().unzip();
         let mut offsets = Vec::with_capacity(rows.len() + 1);
         offsets.push(0);
@@ -112,7 +114,7 @@ impl BounceWeights {
             weights.extend(w);
             offsets.push(slots.len());
         }
-        BounceWeights { masks, rows: offsets, slots, weights, first_slot }
+        BounceWeights { masks, rows: offsets, slots, weights, first_slot, stamps }
     }
 
     pub fn receivers(&self) -> usize {
@@ -129,10 +131,11 @@ impl BounceWeights {
     }
 
     /// Irradiance / pi (3 per receiver, unclamped) under per-instance vertex radiance (None:
-    /// black), which must have the instance layout the weights were recorded with.
-    pub fn apply(&self, radiance: &[Option<&[Rgb]>], vertex_counts: &[usize]) -> Result<Vec<f32>> {
-        if first_slots(vertex_counts.iter().copied())? != self.first_slot {
-            return Err(Error::invalid("the scene's instances or vertex counts changed since these bounce weights were recorded"));
+    /// black) of the scene whose instance stamps are `stamps`: the scene they were recorded
+    /// in, with its blockers as they were (else what the receivers see may have changed).
+    pub fn apply(&self, radiance: &[Option<&[Rgb]>], stamps: &[u64]) -> Result<Vec<f32>> {
+        if stamps != self.stamps {
+            return Err(Error::invalid("the scene's geometry or instances changed since these bounce weights were recorded (or they belong to another scene): record them again"));
         }
         let mut flat = vec![[0.0f32; 3]; *self.first_slot.last().expect("non-empty") as usize];
         for (i, r) in radiance.iter().enumerate() {
@@ -172,13 +175,13 @@ mod tests {
     fn apply_weighs_each_instances_vertices() {
         let first = first_slots([2usize, 1].into_iter()).unwrap();
         let rows = vec![(vec![0, 2], vec![0.5, 0.25]), (vec![], vec![]), (vec![1], vec![2.0])];
-        let w = BounceWeights::new(rows.into_iter().map(|r| (Mask::EMPTY, r)).collect(), first);
+        let w = BounceWeights::new(rows.into_iter().map(|r| (Mask::EMPTY, r)).collect(), first, vec![7, 8]);
         let a: Vec<Rgb> = vec![[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]];
         let b: Vec<Rgb> = vec![[8.0, 8.0, 8.0]];
-        let out = w.apply(&[Some(&a), Some(&b)], &[2, 1]).unwrap();
+        let out = w.apply(&[Some(&a), Some(&b)], &[7, 8]).unwrap();
         assert_eq!(out, vec![2.5, 3.0, 3.5, 0.0, 0.0, 0.0, 8.0, 10.0, 12.0]);
-        let dark = w.apply(&[Some(&a), None], &[2, 1]).unwrap();
+        let dark = w.apply(&[Some(&a), None], &[7, 8]).unwrap();
         assert_eq!(&dark[..3], &[0.5, 1.0, 1.5]);
-        assert!(w.apply(&[Some(&a), Some(&b)], &[2, 2]).is_err());
+        assert!(w.apply(&[Some(&a), Some(&b)], &[7, 9]).is_err());
     }
 }

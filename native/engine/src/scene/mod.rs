@@ -475,7 +475,7 @@ impl Scene {
         receivers::check(points, Some(normals))?;
         let offset = receivers::offset(offset, self.size())?;
         let table = PlaneTable::shared(table_resolution.unwrap_or(self.table_resolution))?;
-        let first_slot = bounce_weights::first_slots(self.instance_vertex_counts().into_iter())?;
+        let first_slot = bounce_weights::first_slots(self.instances.iter().map(|(m, _)| self.meshes[*m as usize].positions.len()))?;
         let slots = *first_slot.last().expect("non-empty") as usize;
         let cell_weights = bounce_weights::normal_cell_weights();
         let (trees, positions) = self.walk_parts();
@@ -492,17 +492,13 @@ impl Scene {
             scratch.hits = hits;
             (mask, row)
         })?;
-        Ok(BounceWeights::new(rows, first_slot))
+        Ok(BounceWeights::new(rows, first_slot, self.stamps.clone()))
     }
 
     /// Irradiance / pi (3 per receiver, unclamped) that `weights` give under the radiance the
     /// scene shows now (`set_radiance`, `set_instance_radiance`).
     pub fn apply_bounce_weights(&self, weights: &BounceWeights) -> Result<Vec<f32>> {
-        weights.apply(&self.radiance_by_instance(), &self.instance_vertex_counts())
-    }
-
-    fn instance_vertex_counts(&self) -> Vec<usize> {
-        self.instances.iter().map(|(m, _)| self.meshes[*m as usize].positions.len()).collect()
+        weights.apply(&self.radiance_by_instance(), &self.stamps)
     }
 }
 
