@@ -39,7 +39,8 @@ def vertex_radiance(scene, receivers, direct, bounces, offset=None, progress=Non
         _show(scene, receivers, radiance)
         gathered = None
         if vertices and any(r.any() for r in radiance):
-            record = record or VertexRecord(scene, receivers, offset, progress, steps)
+            if record is None:
+                record = VertexRecord(scene, receivers, offset, progress, steps)
             gathered = record.gathered()
         elif steps is not None:
             steps.step(vertices)
@@ -99,7 +100,10 @@ def _record(scene, points, normals, offset, progress, steps):
         w = scene.bounce_weights(points[s], normals[s], offset=offset, progress=progress if steps is None else None)
         masks[s] = w.masks
         entries += w.entries
-        weights = None if weights is None or entries > MAX_WEIGHT_ENTRIES else weights + [w]
+        if weights is not None:
+            weights.append(w)
+            if entries > MAX_WEIGHT_ENTRIES:
+                weights = None  # freed: past the budget, passes gather anew
     return masks, weights
 
 
