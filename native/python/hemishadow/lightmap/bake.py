@@ -345,17 +345,6 @@ def _indirect(scene, receivers, points, ng, valid, texel_id, lighting, suns, lam
     return out[of_sample]
 
 
-def hemisphere_valid(scene, points, ng, masks, offset):
-    """`Scene.valid` where it can be False: a receiver is invalid when back faces cover more
-    than half its disk's cells, so one with at most half its cells blocked is valid (the
-    probes use it with masks they already have)."""
-    valid = np.ones(len(points), bool)
-    maybe = blocked_cells(masks) > 0.45 * cells.directions().any(axis=1).sum()
-    if maybe.any():
-        valid[maybe] = scene.valid(points[maybe], ng[maybe], offset=offset)
-    return valid
-
-
 def _masks_and_valid(scene, points, ng, offset, steps=None):
     """Raw masks (P, 16) and validity (P,) of the samples. `Scene.valid` is asked only where
     more than 45 % of a mask is blocked (it cannot fail below half), a second rasterization;
