@@ -277,8 +277,6 @@ impl Sink for MaskSink<'_> {
     }
 
     fn done(&self) -> bool {
-        static NO: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
-        if *NO.get_or_init(|| std::env::var_os("HS_NODONE").is_some()) { return false; }
         self.mask == self.full
     }
 }
