@@ -404,6 +404,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("Cancelled", m.py().get_type::<Cancelled>())?;
     m.add("DEFAULT_TABLE_RESOLUTION", engine::plane_table::DEFAULT_RESOLUTION)?;
     m.add("DEFAULT_FAR_LOD", engine::group_tree::FAR_LOD)?;
+    m.add("BACK_FACE_LIMIT", engine::scene::receivers::BACK_FACE_LIMIT)?;
     m.add("MASK_SIDE", engine::disk_mask::MASK_SIDE)?;
     Ok(())
 }

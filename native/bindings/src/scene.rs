@@ -300,21 +300,20 @@ impl PyScene {
         ))
     }
 
-    #[pyo3(signature = (points, normals, offset, table_resolution=None, progress=None))]
+    #[pyo3(signature = (points, normals, offset, progress=None))]
     fn bounce_weights(
         &mut self,
         py: Python<'_>,
         points: PyReadonlyArray2<f32>,
         normals: PyReadonlyArray2<f32>,
         offset: Option<f32>,
-        table_resolution: Option<usize>,
         progress: Option<Py<PyAny>>,
     ) -> PyResult<PyBounceWeights> {
         let (p, n) = (rows3(&points, "points")?, rows3(&normals, "normals")?);
         let inner = &mut self.inner;
         let mut reporter = PyProgress::new(progress);
         let report = &mut reporter;
-        let result = run(py, || inner.bounce_weights(&p, &n, offset, table_resolution, &mut |f| report.report(f)));
+        let result = run(py, || inner.bounce_weights(&p, &n, offset, &mut |f| report.report(f)));
         Ok(PyBounceWeights { inner: reporter.finish(result)? })
     }
 

@@ -225,7 +225,7 @@ class Scene:
                                                     _checks.progress(progress))
         return sh, np.ascontiguousarray(masks.transpose(1, 0, 2)), np.ascontiguousarray(back.T)
 
-    def bounce_weights(self, points, normals, *, offset=None, table_resolution=None, progress=None):
+    def bounce_weights(self, points, normals, *, offset=None, progress=None):
         """Records, per receiver, the weight of every vertex it sees in `gather`'s ordered mode,
         so that bounce passes, which change only the radiance, need no walk through the scene:
         `BounceWeights.irradiance()` then equals `gather(points, normals, bands=3)` evaluated
@@ -233,10 +233,9 @@ class Scene:
         under whatever radiance the scene shows at that time, and `BounceWeights.masks`, the
         receivers' `visibility` masks from the same walk. Once the scene's geometry or
         instances change, `irradiance()` raises ValueError (what the receivers see may have
-        changed). table_resolution: the plane table's (default: the scene's)."""
+        changed)."""
         pts, norms = self._receivers(points, normals)
-        resolution = None if table_resolution is None else int(table_resolution)
-        native = self._native.bounce_weights(pts, norms, _checks.offset(offset), resolution, _checks.progress(progress))
+        native = self._native.bounce_weights(pts, norms, _checks.offset(offset), _checks.progress(progress))
         return BounceWeights(self, native)
 
     def _receivers(self, points, normals):

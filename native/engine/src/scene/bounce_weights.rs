@@ -62,10 +62,9 @@ fn cell_weights_along_z() -> Vec<f32> {
     (0..MASK_CELLS).map(|cell| projector.cell_weights(cell).iter().enumerate().map(|(i, w)| band(i) * y[i] * w).sum()).collect()
 }
 
-/// Per thread: the hits of one receiver and a dense accumulator over every vertex slot.
+/// Per thread: the walk's stack and a dense accumulator over every vertex slot.
 pub struct Scratch {
     pub stack: Vec<crate::mesh::Vec3>,
-    pub hits: Vec<Hit>,
     sums: Vec<f32>,
     seen: Vec<bool>,
     touched: Vec<u32>,
@@ -73,26 +72,26 @@ pub struct Scratch {
 
 impl Scratch {
     pub fn new(slots: usize) -> Self {
-        Scratch { stack: Vec::new(), hits: vec![Hit::default(); MASK_CELLS], sums: vec![0.0; slots], seen: vec![false; slots], touched: Vec::new() }
+        Scratch { stack: Vec::new(), sums: vec![0.0; slots], seen: vec![false; slots], touched: Vec::new() }
     }
 }
 
-/// One receiver's row: the weight of every vertex its covered cells see, in slot order.
-pub fn row(sink: &DepthSink, cell_weights: &[f32], first_slot: &[u32], scratch: &mut Scratch) -> (Vec<u32>, Vec<f32>) {
+/// One receiver's vertex slots and their weights, in slot order.
+pub type Row = (Vec<u32>, Vec<f32>);
+
+/// One receiver's row: the weight of every vertex its covered cells see.
+pub fn row(sink: &DepthSink, cell_weights: &[f32], first_slot: &[u32], scratch: &mut Scratch) -> Row {
     let Scratch { sums, seen, touched, .. } = scratch;
-    for cell in 0..MASK_CELLS {
-        if !sink.depth[cell].is_finite() {
-            continue;
-        }
-        let hit = sink.hit(cell).expect("a recording sink");
-        let base = first_slot[hit.instance as usize];
-        for (id, b) in hit.ids.iter().zip(hit.weights) {
+    for (cell, &cell_weight) in cell_weights.iter().enumerate() {
+        let Some(Hit { instance, ids, weights }) = sink.hit(cell) else { continue };
+        let base = first_slot[instance as usize];
+        for (id, b) in ids.iter().zip(weights) {
             let slot = (base + id) as usize;
             if !seen[slot] {
                 seen[slot] = true;
                 touched.push(slot as u32);
             }
-            sums[slot] += cell_weights[cell] * b;
+            sums[slot] += cell_weight * b;
         }
     }
     touched.sort_unstable();
@@ -103,8 +102,8 @@ pub fn row(sink: &DepthSink, cell_weights: &[f32], first_slot: &[u32], scratch: 
 
 impl BounceWeights {
     /// From each receiver's mask and row (`row`).
-    pub fn new(receivers: Vec<(Mask, (Vec<u32>, Vec<f32>))>, first_slot: Vec<u32>, stamps: Vec<u64>) -> Self {
-        let (masks, rows): (Vec<Mask>, Vec<_>) = receivers.into_iter().unzip();
+    pub fn new(receivers: Vec<(Mask, Row)>, first_slot: Vec<u32>, stamps: Vec<u64>) -> Self {
+        let (masks, rows): (Vec<Mask>, Vec<Row>) = receivers.into_iter().unzip();
         let mut offsets = Vec::with_capacity(rows.len() + 1);
         offsets.push(0);
         let total = rows.iter().map(|r| r.0.len()).sum();
@@ -124,10 +123,6 @@ impl BounceWeights {
     /// Stored (vertex, weight) pairs over all receivers.
     pub fn entries(&self) -> usize {
         self.slots.len()
-    }
-
-    pub fn first_slot(&self) -> &[u32] {
-        &self.first_slot
     }
 
     /// Irradiance / pi (3 per receiver, unclamped) under per-instance vertex radiance (None:

@@ -63,10 +63,6 @@ impl Projector {
         &self.weights[cell * k..(cell + 1) * k]
     }
 
-    pub fn basis(&self) -> &ShBasis {
-        &self.basis
-    }
-
     /// Adds the SH projection (k x 3, coefficient-major) of what `sink` saw to `out`.
     pub fn add(&self, sink: &DepthSink, receiver: &Receiver, out: &mut [f32]) {
         let k = self.coeffs();

@@ -402,8 +402,8 @@ impl Scene {
     /// Cheaper than both calls where most receivers need the validity (closed rooms).
     pub fn visibility_valid(&mut self, points: &[Vec3], normals: &[Vec3], offset: Option<f32>) -> Result<(Vec<Mask>, Vec<bool>)> {
         let full = disk();
-        let both = self.depth_buffers(points, normals, offset, |sink| hemisphere_view(sink, &full))?;
-        Ok(both.into_iter().map(|(mask, back)| (mask, back <= receivers::BACK_FACE_LIMIT)).unzip())
+        let both = self.depth_buffers(points, normals, offset, |sink| (closed_mask(sink, &full), receivers::is_valid(&sink.back)))?;
+        Ok(both.into_iter().unzip())
     }
 
     /// `read` of each receiver's depth buffer (the ordered mode without radiance).
@@ -430,12 +430,17 @@ impl Scene {
     /// radiance of the nearest blocker in every direction, over the receiver's hemisphere, or
     /// over the whole sphere when `normals` is None.
     pub fn gather(&mut self, points: &[Vec3], normals: Option<&[Vec3]>, bands: usize, offset: Option<f32>, progress: Progress) -> Result<Vec<f32>> {
-        Ok(self.gather_views(points, normals, bands, offset, progress)?.0)
+        Ok(self.ordered_gather(points, normals, bands, offset, false, progress)?.0)
     }
 
     /// `gather`, with each walked hemisphere's view (its normal's, or +Z then -Z without
     /// normals; receiver-major): probes get their masks and validity from the same walks.
     pub fn gather_views(&mut self, points: &[Vec3], normals: Option<&[Vec3]>, bands: usize, offset: Option<f32>, progress: Progress) -> Result<(Vec<f32>, Vec<HemisphereView>)> {
+        self.ordered_gather(points, normals, bands, offset, true, progress)
+    }
+
+    /// `gather`, and the views when `views` (else none: plain gathers skip that work).
+    fn ordered_gather(&mut self, points: &[Vec3], normals: Option<&[Vec3]>, bands: usize, offset: Option<f32>, views: bool, progress: Progress) -> Result<(Vec<f32>, Vec<HemisphereView>)> {
         receivers::check(points, normals)?;
         let projector = gather::Projector::new(ShBasis::new(bands)?);
         let offset = receivers::offset(offset, self.size())?;
@@ -451,17 +456,17 @@ impl Scene {
                 None => &[[0.0, 0.0, 1.0], [0.0, 0.0, -1.0]],
             };
             let mut row = vec![0.0f32; k * 3];
-            let views: Vec<HemisphereView> = hemispheres
-                .iter()
-                .map(|n| {
-                    let receiver = receivers::receiver(points[r], *n, offset);
-                    let mut sink = DepthSink::new(&table, &radiance);
-                    walk.run(&receiver, scratch, &mut sink);
-                    projector.add(&sink, &receiver, &mut row);
-                    hemisphere_view(&sink, &full)
-                })
-                .collect();
-            (row, views)
+            let mut seen = Vec::new();
+            for n in hemispheres {
+                let receiver = receivers::receiver(points[r], *n, offset);
+                let mut sink = DepthSink::new(&table, &radiance);
+                walk.run(&receiver, scratch, &mut sink);
+                projector.add(&sink, &receiver, &mut row);
+                if views {
+                    seen.push(hemisphere_view(&sink, &full));
+                }
+            }
+            (row, seen)
         })?;
         let (rows, views): (Vec<Vec<f32>>, Vec<Vec<HemisphereView>>) = rows.into_iter().unzip();
         Ok((rows.concat(), views.concat()))
@@ -470,11 +475,10 @@ impl Scene {
     /// What `gather` (3 bands) then the lobe along each normal would give, recorded as weights
     /// on the vertices each receiver sees (`bounce_weights`), for bounce passes that change
     /// only the radiance, with the receivers' `visibility` masks from the same walk.
-    /// `table_resolution`: the plane table's (default: the scene's).
-    pub fn bounce_weights(&mut self, points: &[Vec3], normals: &[Vec3], offset: Option<f32>, table_resolution: Option<usize>, progress: Progress) -> Result<BounceWeights> {
+    pub fn bounce_weights(&mut self, points: &[Vec3], normals: &[Vec3], offset: Option<f32>, progress: Progress) -> Result<BounceWeights> {
         receivers::check(points, Some(normals))?;
         let offset = receivers::offset(offset, self.size())?;
-        let table = PlaneTable::shared(table_resolution.unwrap_or(self.table_resolution))?;
+        let table = PlaneTable::shared(self.table_resolution)?;
         let first_slot = bounce_weights::first_slots(self.instances.iter().map(|(m, _)| self.meshes[*m as usize].positions.len()))?;
         let slots = *first_slot.last().expect("non-empty") as usize;
         let cell_weights = bounce_weights::normal_cell_weights();
@@ -484,13 +488,9 @@ impl Scene {
         let full = disk();
         let rows = par_collect(points.len(), progress, || bounce_weights::Scratch::new(slots), |r, scratch| {
             let receiver = receivers::receiver(points[r], normals[r], offset);
-            let mut hits = std::mem::take(&mut scratch.hits);
-            let mut sink = DepthSink::recording(&table, &black, &mut hits);
+            let mut sink = DepthSink::recording(&table, &black);
             walk.run(&receiver, &mut scratch.stack, &mut sink);
-            let row = bounce_weights::row(&sink, cell_weights, &first_slot, scratch);
-            let mask = pinholes::close(&sink.covered(), &full, traverse::PINHOLE_NEIGHBOURS);
-            scratch.hits = hits;
-            (mask, row)
+            (closed_mask(&sink, &full), bounce_weights::row(&sink, cell_weights, &first_slot, scratch))
         })?;
         Ok(BounceWeights::new(rows, first_slot, self.stamps.clone()))
     }
@@ -508,7 +508,12 @@ impl Scene {
 pub type HemisphereView = (Mask, f32);
 
 fn hemisphere_view(sink: &DepthSink, full: &Mask) -> HemisphereView {
-    (pinholes::close(&sink.covered(), full, traverse::PINHOLE_NEIGHBOURS), receivers::back_fraction(&sink.back))
+    (closed_mask(sink, full), receivers::back_fraction(&sink.back))
+}
+
+/// The cells the depth buffer covers, pinholes closed as `visibility` closes them.
+fn closed_mask(sink: &DepthSink, full: &Mask) -> Mask {
+    pinholes::close(&sink.covered(), full, traverse::PINHOLE_NEIGHBOURS)
 }
 
 /// Scene receivers see large blockers near their horizon (floors, walls) far more often than

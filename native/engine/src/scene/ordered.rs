@@ -25,9 +25,9 @@ pub type Rgb = [f32; 3];
 /// Relative depth difference under which two blockers count as coincident.
 const TIE: f32 = 1e-4;
 
-/// The nearest blocker of a cell, as `bounce_weights` records it: the instance, the corners'
-/// vertex ids and the cell direction's barycentric weights on them.
-#[derive(Clone, Copy, Default)]
+/// The nearest blocker of a cell: its instance, its corners' vertex ids and the cell
+/// direction's barycentric weights on them.
+#[derive(Clone, Copy)]
 pub struct Hit {
     pub instance: u32,
     pub ids: [u32; 3],
@@ -67,16 +67,14 @@ pub struct DepthSink<'a> {
     pub back: Mask,
     pub colour: [Rgb; MASK_CELLS],
     pub triangles: u64,
-    /// When recording, each covered cell's nearest blocker (cells not covered keep stale
-    /// entries: read only where `depth` is finite).
-    hits: Option<&'a mut [Hit]>,
     /// Triangles that won a cell, and per cell the index of its winner: barycentric weights
-    /// (colour, hits) are taken once per cell in `resolve`, not at every win (a cell is won
-    /// a few times over as nearer blockers arrive).
+    /// are taken once per cell (`hit`), not at every win (a cell is won a few times over as
+    /// nearer blockers arrive).
     winners: Vec<Winner>,
     winner: [u32; MASK_CELLS],
-    /// Whether anything reads colours or hits (else depth and facing are all there is).
-    resolves: bool,
+    /// Whether winners are kept: for colours, or for `hit` (else depth and facing are all
+    /// there is).
+    keeps_winners: bool,
     /// Triangles in arrival order, a batch at a time: their texels are computed lane-parallel
     /// when the batch is full (`edge_texels`, as the mask rasterizer does) and prefetched;
     /// the batch before is drawn then, by when its masks are in cache (the 256 table is 48
@@ -98,10 +96,9 @@ impl<'a> DepthSink<'a> {
             back: Mask::EMPTY,
             colour: [[0.0; 3]; MASK_CELLS],
             triangles: 0,
-            hits: None,
             winners: Vec::new(),
             winner: [0; MASK_CELLS],
-            resolves: radiance.iter().any(Option::is_some),
+            keeps_winners: radiance.iter().any(Option::is_some),
             batch: [[[0.0; LANES]; 3]; 3],
             batch_ids: [[0; 3]; LANES],
             batch_tags: [NO_TAG; LANES],
@@ -111,15 +108,22 @@ impl<'a> DepthSink<'a> {
         }
     }
 
-    /// A sink that also records each cell's nearest blocker into `hits` (MASK_CELLS long).
-    pub fn recording(table: &'a PlaneTable, radiance: &'a [Option<&'a [Rgb]>], hits: &'a mut [Hit]) -> Self {
-        assert_eq!(hits.len(), MASK_CELLS);
-        DepthSink { hits: Some(hits), resolves: true, ..DepthSink::new(table, radiance) }
+    /// A sink that keeps each cell's nearest blocker for `hit`, whatever the radiance.
+    pub fn recording(table: &'a PlaneTable, radiance: &'a [Option<&'a [Rgb]>]) -> Self {
+        DepthSink { keeps_winners: true, ..DepthSink::new(table, radiance) }
     }
 
-    /// The recorded nearest blocker of a covered cell.
-    pub fn hit(&self, cell: usize) -> Option<&Hit> {
-        self.hits.as_ref().map(|h| &h[cell])
+    /// The nearest blocker of a covered cell once the walk is over (None where nothing is
+    /// seen, or when winners are not kept).
+    pub fn hit(&self, cell: usize) -> Option<Hit> {
+        let t = self.depth[cell];
+        if !(self.keeps_winners && t.is_finite()) {
+            return None;
+        }
+        let w = &self.winners[self.winner[cell] as usize];
+        let d = cell_directions()[cell];
+        let q = sub([d[0] * t, d[1] * t, d[2] * t], w.a);
+        Some(Hit { instance: w.instance, ids: w.ids, weights: barycentric(q, w.e1, w.e2, w.normal, w.nn) })
     }
 
     /// Cells some blocker covers.
@@ -226,43 +230,26 @@ impl DepthSink<'_> {
                 won = true;
             }
         }
-        if won && self.resolves {
+        if won && self.keeps_winners {
             self.winners.push(Winner { a, e1, e2, normal, nn, ids, instance: tag.instance });
         }
     }
 
-    /// Colour (and hits) of every covered cell from its winner, once the walk is over: the
-    /// radiance interpolated barycentrically at the cell's direction on its nearest blocker
-    /// (black when that blocker's instance shows none).
+    /// Colour of every covered cell from its winner, once the walk is over: the radiance
+    /// interpolated barycentrically at the cell's direction on its nearest blocker (black when
+    /// that blocker's instance shows none).
     fn resolve(&mut self) {
-        if !self.resolves {
-            return;
+        if !self.keeps_winners || self.radiance.iter().all(Option::is_none) {
+            return; // colours stay black
         }
-        let directions = cell_directions();
         for cell in 0..MASK_CELLS {
-            let t = self.depth[cell];
-            if !t.is_finite() {
+            if !self.depth[cell].is_finite() {
                 continue;
             }
-            let w = self.winners[self.winner[cell] as usize];
-            let radiance = self.radiance[w.instance as usize];
-            if radiance.is_none() && self.hits.is_none() {
-                self.colour[cell] = [0.0; 3];
-                continue;
-            }
-            let d = directions[cell];
-            let q = sub([d[0] * t, d[1] * t, d[2] * t], w.a);
-            let [alpha, beta, gamma] = barycentric(q, w.e1, w.e2, w.normal, w.nn);
-            self.colour[cell] = match radiance {
-                Some(r) => {
-                    let [ra, rb, rc] = w.ids.map(|v| r[v as usize]);
-                    [0, 1, 2].map(|k| alpha * ra[k] + beta * rb[k] + gamma * rc[k])
-                }
-                None => [0.0; 3],
-            };
-            if let Some(hits) = self.hits.as_deref_mut() {
-                hits[cell] = Hit { instance: w.instance, ids: w.ids, weights: [alpha, beta, gamma] };
-            }
+            let Some(r) = self.radiance[self.winners[self.winner[cell] as usize].instance as usize] else { continue };
+            let Hit { ids, weights, .. } = self.hit(cell).expect("a covered cell with its winner kept");
+            let [ra, rb, rc] = ids.map(|v| r[v as usize]);
+            self.colour[cell] = [0, 1, 2].map(|k| weights[0] * ra[k] + weights[1] * rb[k] + weights[2] * rc[k]);
         }
     }
 }

@@ -12,9 +12,10 @@ import itertools
 
 import numpy as np
 
+from .. import _native
 from . import capture
 
-BACK_FACE_LIMIT = 0.5  # of the sphere, as `Scene.valid` allows of a hemisphere
+BACK_FACE_LIMIT = _native.BACK_FACE_LIMIT  # of the sphere, as `Scene.valid` allows of a hemisphere
 _STEPS = (0.25, 0.5)
 
 
