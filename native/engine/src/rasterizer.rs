@@ -204,6 +204,15 @@ impl TriangleBatch {
         }
     }
 
+    /// Rasterizes the `lanes` of `corners` (a whole packet, local coordinates) into `mask`
+    /// through the pipeline, beside any triangles queued one at a time.
+    #[inline(always)]
+    pub fn push_packet(&mut self, table: &PlaneTable, corners: &LocalCorners, lanes: u32, mask: &mut Mask) {
+        let mut texels = [[0u32; LANES]; 3];
+        let solid = edge_texels(table, corners, &mut texels);
+        self.pipeline.advance(table, &texels, solid & lanes, mask);
+    }
+
     /// Rasterizes everything queued into `mask` and empties the batch and the pipeline.
     #[inline(always)]
     pub fn finish(&mut self, table: &PlaneTable, mask: &mut Mask) {

@@ -17,6 +17,7 @@
 use rayon::prelude::*;
 
 use crate::mesh::Vec3;
+use crate::packets::PacketLists;
 
 /// Triangles per leaf cluster (at most).
 pub const LEAF_TRIANGLES: usize = 64;
@@ -103,6 +104,47 @@ pub struct MeshTree {
     /// Per node, the range of `leaves` below it (a pre-order tree keeps them contiguous).
     leaf_span: Vec<(u32, u32)>,
     pub largest_compact: usize,
+    /// The leaves, proxies and coarse stand-ins again, in packets for the mask walk.
+    pub packets: TreePackets,
+}
+
+/// A mesh tree's triangles in packets of `LANES` (`packets.rs`), for walks that only need
+/// masks (`traverse::MaskSink`): a receiver then transforms and tests eight triangles at a
+/// time, as the solver does with its own, instead of gathering them one by one from the
+/// compact vertex lists. Corners in mesh space, refreshed by `MeshTree::refit`.
+#[derive(Default)]
+pub struct TreePackets {
+    /// List l: leaf l's triangles, over the mesh's vertices.
+    pub leaves: PacketLists,
+    /// List n: node n's proxy; list k: coarse stand-in k; both over `pushed`.
+    pub proxies: PacketLists,
+    pub coarse: PacketLists,
+    /// Every proxy's pushed-out vertices, then every coarse stand-in's, one after another.
+    pushed: Vec<Vec3>,
+}
+
+impl TreePackets {
+    fn new(leaves: &[Compact], proxies: &[Compact], coarse: &[Compact]) -> Self {
+        let leaf_lists: Vec<Vec<[u32; 3]>> = leaves.iter().map(|l| l.mesh_triangles().collect()).collect();
+        let mut first = 0u32;
+        let mut numbered = |c: &Compact| {
+            let list: Vec<[u32; 3]> = c.triangles.iter().map(|t| t.map(|k| first + k)).collect();
+            first += c.vertices.len() as u32;
+            list
+        };
+        let proxy_lists: Vec<_> = proxies.iter().map(&mut numbered).collect();
+        let coarse_lists: Vec<_> = coarse.iter().map(&mut numbered).collect();
+        let packets = |lists: &[Vec<[u32; 3]>]| PacketLists::new(lists.iter().map(|l| &l[..]));
+        TreePackets { leaves: packets(&leaf_lists), proxies: packets(&proxy_lists), coarse: packets(&coarse_lists), pushed: Vec::new() }
+    }
+
+    fn update(&mut self, positions: &[Vec3], proxy_positions: &[Vec<Vec3>], coarse_positions: &[Vec<Vec3>]) {
+        self.leaves.update(positions);
+        self.pushed.clear();
+        self.pushed.extend(proxy_positions.iter().chain(coarse_positions).flatten());
+        self.proxies.update(&self.pushed);
+        self.coarse.update(&self.pushed);
+    }
 }
 
 impl MeshTree {
@@ -137,6 +179,7 @@ impl MeshTree {
         }
         let largest_compact = leaves.iter().chain(&proxies).map(|c| c.vertices.len()).max().unwrap_or(0);
         let leaf_span = leaf_spans(&nodes);
+        let packets = TreePackets::new(&leaves, &proxies, &coarse);
         let mut tree = MeshTree {
             nodes,
             leaves,
@@ -151,6 +194,7 @@ impl MeshTree {
             slabs: Vec::new(),
             leaf_span,
             largest_compact,
+            packets,
         };
         tree.refit(positions);
         tree
@@ -177,6 +221,7 @@ impl MeshTree {
         self.spheres = bounds.iter().map(sphere_of).collect();
         self.bounds = bounds;
         self.slabs = (0..self.nodes.len()).into_par_iter().map(|n| self.slab(n, positions)).collect();
+        self.packets.update(positions, &self.proxy_positions, &self.coarse_positions);
     }
 
     /// Node `n`'s slab (see `slabs`) around the vertices of the leaves below it.

@@ -261,3 +261,52 @@ fn a_closed_room_of_fine_grids_lets_no_light_through() {
         assert!(leaked <= coarse + 5e-4, "lod {lod}: AO up to {leaked}, two triangles per face {coarse}");
     }
 }
+
+/// Collects a walk's triangles one by one (no packets), for comparing the two ways in.
+struct OneByOne(Vec<[Vec3; 3]>);
+
+impl traverse::Sink for OneByOne {
+    fn triangle(&mut self, a: Vec3, b: Vec3, c: Vec3, _: [u32; 3], _: traverse::Tag) {
+        self.0.push([a, b, c]);
+    }
+}
+
+#[test]
+fn mask_walks_through_packets_draw_what_single_triangles_draw() {
+    // Leaves, proxies (near and far) and coarse stand-ins, turned, scaled and mirrored
+    // instances: the packets' corners and horizon test must be the triangle path's, bit for bit.
+    let mut scene = grid_box(30);
+    let (v, t) = cube();
+    let c = scene.add_mesh(&v, &t).unwrap();
+    scene.add_instance(c, &translate(0.3, -0.2, -0.6)).unwrap();
+    let turned = [0.0, -0.25, 0.0, 4.0, 0.25, 0.0, 0.0, 0.5, 0.0, 0.0, -0.25, 0.0, 0.0, 0.0, 0.0, 1.0];
+    for k in 0..20 {
+        let mut m = turned;
+        (m[3], m[7]) = (6.0 + k as f64, -3.0 * (k % 3) as f64);
+        scene.add_instance(0, &m).unwrap();
+    }
+    scene.prepare();
+    let (trees, positions) = scene.walk_parts();
+    let table = PlaneTable::shared(crate::plane_table::DEFAULT_RESOLUTION).unwrap();
+    let mut state = 11u64;
+    let mut next = || {
+        state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        (state >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
+    };
+    let mut drawn = 0;
+    for near_proxies in [false, true] {
+        let walk = Walk { near_proxies, ..scene.scene_walk(&trees, &positions) };
+        for _ in 0..200 {
+            let receiver = receivers::receiver([0.9 * next(), 0.9 * next(), 0.9 * next()], [next(), next(), next() + 0.01], 1e-4);
+            let mut packets = MaskSink::new(&table, disk());
+            walk.run(&receiver, &mut Vec::new(), &mut packets);
+            let mut single = OneByOne(Vec::new());
+            walk.run(&receiver, &mut Vec::new(), &mut single);
+            let mut mask = Mask::EMPTY;
+            crate::rasterizer::rasterize(&table, &single.0, &mut mask);
+            assert_eq!(packets.finish_raw().0, mask);
+            drawn += single.0.len();
+        }
+    }
+    assert!(drawn > 400 * 50, "too few triangles drawn to compare: {drawn}");
+}

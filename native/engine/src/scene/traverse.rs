@@ -11,8 +11,9 @@
 
 use crate::disk_mask::Mask;
 use crate::mesh::Vec3;
+use crate::packets::{Packet, LANES};
 use crate::plane_table::PlaneTable;
-use crate::rasterizer::{above_horizon, dot, TriangleBatch};
+use crate::rasterizer::{above_horizon, dot, LocalCorners, TriangleBatch};
 use crate::transfer::Receiver;
 
 use super::affine::Affine;
@@ -42,6 +43,14 @@ pub struct Tag {
 /// horizon only. `ids` are the corners' mesh vertex ids.
 pub trait Sink {
     fn triangle(&mut self, a: Vec3, b: Vec3, c: Vec3, ids: [u32; 3], tag: Tag);
+    /// Sinks that need neither vertex ids nor tags set this and take whole packets instead
+    /// of single triangles (`packet`): the walk then reads the trees' `TreePackets`.
+    const PACKETS: bool = false;
+    /// The `lanes` of a packet (corners in the receiver's frame, each lane with a corner
+    /// above the horizon). Called only when `PACKETS` is set.
+    fn packet(&mut self, _corners: &LocalCorners, _lanes: u32) {
+        unreachable!("Sink::packet called on a sink without PACKETS")
+    }
     /// True when nothing more can change the result (stops the walk early).
     fn done(&self) -> bool {
         false
@@ -183,8 +192,12 @@ impl Walk<'_> {
         if s[3] * s[3] * stretch2 < d2 {
             let coarse = (0..tree.coarse.len()).rev().find(|&k| tree.coarse_error[k].powi(2) * stretch2 < error2 * d2);
             if let Some(k) = coarse {
-                let pushed = &tree.coarse_positions[k];
-                emit(&local, |v| pushed[v], &tree.coarse[k], tag, scratch, sink);
+                if S::PACKETS {
+                    emit_packets(&local, tree.packets.coarse.of(k), sink);
+                } else {
+                    let pushed = &tree.coarse_positions[k];
+                    emit(&local, |v| pushed[v], &tree.coarse[k], tag, scratch, sink);
+                }
                 return;
             }
         }
@@ -206,9 +219,13 @@ impl Walk<'_> {
                 || (self.near_proxies && small && e * e * stretch2 < error2 * local.slab_distance2(&tree.slabs[n]));
             let node = tree.nodes[n];
             let leaf = node.children[0] == NO_CHILD;
-            if far {
+            if far && S::PACKETS {
+                emit_packets(&local, tree.packets.proxies.of(n), sink);
+            } else if far {
                 let pushed = &tree.proxy_positions[n];
                 emit(&local, |k| pushed[k], &tree.proxies[n], tag, scratch, sink);
+            } else if leaf && S::PACKETS {
+                emit_packets(&local, tree.packets.leaves.of(node.leaf as usize), sink);
             } else if leaf {
                 let compact = &tree.leaves[node.leaf as usize];
                 emit(&local, |k| positions[compact.vertices[k] as usize], compact, tag, scratch, sink);
@@ -226,12 +243,46 @@ impl Walk<'_> {
 
 #[inline(always)]
 fn emit<S: Sink>(local: &Local, position: impl Fn(usize) -> Vec3, compact: &Compact, tag: Tag, scratch: &mut Vec<Vec3>, sink: &mut S) {
-    scratch.clear();
-    scratch.extend((0..compact.vertices.len()).map(|k| local.apply(position(k))));
+    // A plain loop rather than `extend`, which is not inlined into the AVX2 copy of the walk.
+    let count = compact.vertices.len();
+    if scratch.len() < count {
+        scratch.resize(count, [0.0; 3]);
+    }
+    for (k, out) in scratch[..count].iter_mut().enumerate() {
+        *out = local.apply(position(k));
+    }
     for tri in &compact.triangles {
         let [a, b, c] = tri.map(|k| scratch[k as usize]);
         if above_horizon(a, b, c) {
             sink.triangle(a, b, c, tri.map(|k| compact.vertices[k as usize]), tag);
+        }
+    }
+}
+
+/// The packets' triangles with a corner above the horizon, in the receiver's frame, to a
+/// sink that takes packets; packets whose box lies below the horizon are skipped whole. The
+/// corners are the ones `emit` computes (`Local::apply`), bit for bit.
+#[inline(always)]
+fn emit_packets<S: Sink>(local: &Local, packets: &[Packet], sink: &mut S) {
+    for packet in packets {
+        if local.below(&packet.bounds) {
+            continue;
+        }
+        let mut corners: LocalCorners = [[[0.0; LANES]; 3]; 3];
+        for (k, corner) in packet.corners.iter().enumerate() {
+            for (r, row) in local.rows.iter().enumerate() {
+                for i in 0..LANES {
+                    corners[k][r][i] = row[0] * corner[0][i] + row[1] * corner[1][i] + row[2] * corner[2][i] + local.shift[r];
+                }
+            }
+        }
+        let mut above = 0u32;
+        for i in 0..LANES {
+            let up = corners[0][2][i] > 0.0 || corners[1][2][i] > 0.0 || corners[2][2][i] > 0.0;
+            above |= (up as u32) << i;
+        }
+        if above & packet.lanes != 0 {
+            sink.packet(&corners, above & packet.lanes);
         }
     }
 }
@@ -274,6 +325,14 @@ impl Sink for MaskSink<'_> {
     fn triangle(&mut self, a: Vec3, b: Vec3, c: Vec3, _: [u32; 3], _: Tag) {
         self.batch.push(self.table, a, b, c, &mut self.mask);
         self.triangles += 1;
+    }
+
+    const PACKETS: bool = true;
+
+    #[inline(always)]
+    fn packet(&mut self, corners: &LocalCorners, lanes: u32) {
+        self.batch.push_packet(self.table, corners, lanes, &mut self.mask);
+        self.triangles += lanes.count_ones() as u64;
     }
 
     fn done(&self) -> bool {
