@@ -103,9 +103,10 @@ fn lane_bits(lanes: &[bool; LANES]) -> u32 {
 /// arrived.
 #[derive(Default)]
 pub struct Pipeline {
-    /// Texels of the previous packet's kept triangles: prefetched, not yet OR-ed.
-    pending: [[u32; 3]; LANES],
-    pending_len: usize,
+    /// Texels of the previous packet (`[edge][lane]`) and its kept lanes: prefetched, not yet
+    /// OR-ed.
+    pending: [[u32; LANES]; 3],
+    pending_lanes: u32,
 }
 
 impl Pipeline {
@@ -113,28 +114,28 @@ impl Pipeline {
     /// makes these pending.
     #[inline(always)]
     fn advance(&mut self, table: &PlaneTable, texels: &[[u32; LANES]; 3], lanes: u32, mask: &mut Mask) {
-        let mut next = [[0u32; 3]; LANES];
-        let mut next_len = 0;
         let mut bits = lanes;
         while bits != 0 {
             let i = bits.trailing_zeros() as usize;
             bits &= bits - 1;
-            next[next_len] = [texels[0][i], texels[1][i], texels[2][i]];
-            next[next_len].iter().for_each(|&t| table.prefetch(t));
-            next_len += 1;
+            texels.iter().for_each(|edge| table.prefetch(edge[i]));
         }
         self.drain(table, mask);
-        self.pending = next;
-        self.pending_len = next_len;
+        self.pending = *texels;
+        self.pending_lanes = lanes;
     }
 
     /// ORs every pending triangle into `mask`.
     #[inline(always)]
     pub fn drain(&mut self, table: &PlaneTable, mask: &mut Mask) {
-        for [ab, bc, ca] in &self.pending[..self.pending_len] {
-            mask.or_assign(&Mask::and3(table.mask_at(*ab), table.mask_at(*bc), table.mask_at(*ca)));
+        let [ab, bc, ca] = &self.pending;
+        let mut bits = self.pending_lanes;
+        while bits != 0 {
+            let i = bits.trailing_zeros() as usize;
+            bits &= bits - 1;
+            mask.or_assign(&Mask::and3(table.mask_at(ab[i]), table.mask_at(bc[i]), table.mask_at(ca[i])));
         }
-        self.pending_len = 0;
+        self.pending_lanes = 0;
     }
 
     /// Rasterizes the lanes of `packet` set in `lanes` for a receiver at `origin` with tangent
@@ -164,9 +165,10 @@ impl Pipeline {
         }
         let mut candidate = [false; LANES];
         for i in 0..LANES {
-            let above = local[0][2][i] > 0.0 || local[1][2][i] > 0.0 || local[2][2][i] > 0.0;
-            let own = packet.ids[0][i] == exclude || packet.ids[1][i] == exclude || packet.ids[2][i] == exclude;
-            candidate[i] = above && !own;
+            // `|` rather than `||`: no branches, so the lanes are tested in vector registers.
+            let above = (local[0][2][i] > 0.0) | (local[1][2][i] > 0.0) | (local[2][2][i] > 0.0);
+            let own = (packet.ids[0][i] == exclude) | (packet.ids[1][i] == exclude) | (packet.ids[2][i] == exclude);
+            candidate[i] = above & !own;
         }
         let candidates = lane_bits(&candidate) & lanes & packet.lanes;
         if candidates == 0 {
