@@ -278,7 +278,7 @@ fn emit_packets<S: Sink>(local: &Local, packets: &[Packet], sink: &mut S) {
         }
         let mut above = 0u32;
         for i in 0..LANES {
-            let up = corners[0][2][i] > 0.0 || corners[1][2][i] > 0.0 || corners[2][2][i] > 0.0;
+            let up = (corners[0][2][i] > 0.0) | (corners[1][2][i] > 0.0) | (corners[2][2][i] > 0.0); // no branches
             above |= (up as u32) << i;
         }
         if above & packet.lanes != 0 {
