@@ -35,6 +35,17 @@ pub fn above_horizon(a: [f32; 3], b: [f32; 3], c: [f32; 3]) -> bool {
     a[2] > 0.0 || b[2] > 0.0 || c[2] > 0.0
 }
 
+/// Bit i set when lane i of `corners` has a corner above the horizon: `above_horizon` for
+/// every lane, with `|` rather than `||` so that no branch is taken per lane.
+#[inline(always)]
+pub fn lanes_above_horizon(corners: &LocalCorners) -> u32 {
+    let mut above = [false; LANES];
+    for (i, up) in above.iter_mut().enumerate() {
+        *up = (corners[0][2][i] > 0.0) | (corners[1][2][i] > 0.0) | (corners[2][2][i] > 0.0);
+    }
+    lane_bits(&above)
+}
+
 /// Mask of the cells covered by triangle (a, b, c) given relative to the receiver in its tangent
 /// frame (+Z = normal). None when it covers nothing: entirely below the horizon, degenerate,
 /// or touching the receiver.
@@ -163,14 +174,11 @@ impl Pipeline {
                 local[k][2][i] = dot(d, frame.n);
             }
         }
-        let mut candidate = [false; LANES];
-        for i in 0..LANES {
-            // `|` rather than `||`: no branches, so the lanes are tested in vector registers.
-            let above = (local[0][2][i] > 0.0) | (local[1][2][i] > 0.0) | (local[2][2][i] > 0.0);
-            let own = (packet.ids[0][i] == exclude) | (packet.ids[1][i] == exclude) | (packet.ids[2][i] == exclude);
-            candidate[i] = above & !own;
+        let mut own = [false; LANES];
+        for (i, own) in own.iter_mut().enumerate() {
+            *own = (packet.ids[0][i] == exclude) | (packet.ids[1][i] == exclude) | (packet.ids[2][i] == exclude);
         }
-        let candidates = lane_bits(&candidate) & lanes & packet.lanes;
+        let candidates = lanes_above_horizon(&local) & !lane_bits(&own) & lanes & packet.lanes;
         if candidates == 0 {
             return 0;
         }

@@ -13,7 +13,7 @@ use crate::disk_mask::Mask;
 use crate::mesh::Vec3;
 use crate::packets::{Packet, LANES};
 use crate::plane_table::PlaneTable;
-use crate::rasterizer::{above_horizon, dot, LocalCorners, TriangleBatch};
+use crate::rasterizer::{above_horizon, dot, lanes_above_horizon, LocalCorners, TriangleBatch};
 use crate::transfer::Receiver;
 
 use super::affine::Affine;
@@ -94,6 +94,21 @@ impl Local {
     #[inline(always)]
     fn apply(&self, p: Vec3) -> Vec3 {
         [0, 1, 2].map(|r| dot(self.rows[r], p) + self.shift[r])
+    }
+
+    /// `apply` to every corner of a packet, lane by lane: the same products in the same order,
+    /// so packets and single triangles give the same corners bit for bit.
+    #[inline(always)]
+    fn apply_packet(&self, packet: &Packet) -> LocalCorners {
+        let mut corners: LocalCorners = [[[0.0; LANES]; 3]; 3];
+        for (k, corner) in packet.corners.iter().enumerate() {
+            for (r, row) in self.rows.iter().enumerate() {
+                for i in 0..LANES {
+                    corners[k][r][i] = row[0] * corner[0][i] + row[1] * corner[1][i] + row[2] * corner[2][i] + self.shift[r];
+                }
+            }
+        }
+        corners
     }
 
     /// A lower bound of the squared distance from the receiver to anything in a node's slab.
@@ -260,29 +275,17 @@ fn emit<S: Sink>(local: &Local, position: impl Fn(usize) -> Vec3, compact: &Comp
 }
 
 /// The packets' triangles with a corner above the horizon, in the receiver's frame, to a
-/// sink that takes packets; packets whose box lies below the horizon are skipped whole. The
-/// corners are the ones `emit` computes (`Local::apply`), bit for bit.
+/// sink that takes packets; packets whose box lies below the horizon are skipped whole.
 #[inline(always)]
 fn emit_packets<S: Sink>(local: &Local, packets: &[Packet], sink: &mut S) {
     for packet in packets {
         if local.below(&packet.bounds) {
             continue;
         }
-        let mut corners: LocalCorners = [[[0.0; LANES]; 3]; 3];
-        for (k, corner) in packet.corners.iter().enumerate() {
-            for (r, row) in local.rows.iter().enumerate() {
-                for i in 0..LANES {
-                    corners[k][r][i] = row[0] * corner[0][i] + row[1] * corner[1][i] + row[2] * corner[2][i] + local.shift[r];
-                }
-            }
-        }
-        let mut above = 0u32;
-        for i in 0..LANES {
-            let up = (corners[0][2][i] > 0.0) | (corners[1][2][i] > 0.0) | (corners[2][2][i] > 0.0); // no branches
-            above |= (up as u32) << i;
-        }
-        if above & packet.lanes != 0 {
-            sink.packet(&corners, above & packet.lanes);
+        let corners = local.apply_packet(packet);
+        let lanes = lanes_above_horizon(&corners) & packet.lanes;
+        if lanes != 0 {
+            sink.packet(&corners, lanes);
         }
     }
 }
