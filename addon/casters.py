@@ -410,7 +410,7 @@ def fingerprint(obj, scene, depsgraph):
         rows += [item.matrix[:3].T, sums[item.mesh_key]]
     rows = np.concatenate(rows) if rows else np.zeros((0, 3))
     head = np.array([[len(rows), 0.0, 0.0], np.abs(rows).max(axis=0, initial=0.0)])
-    return np.concatenate([head, staleness.random_signs(len(rows)) @ rows])
+    return np.concatenate([head, mesh_io.matmul(staleness.random_signs(len(rows)), rows)])
 
 
 def fingerprint_mismatch(stored, current):

@@ -215,7 +215,7 @@ def to_world_transfer(transfer, rotation):
         return transfer
     k = transfer.shape[1]
     turn = hemishadow.rotate_sh(np.eye(k, dtype=np.float32), rotation)  # (K, K): coefficients -> turned
-    return np.ascontiguousarray(transfer @ turn.T, dtype=np.float32)
+    return np.ascontiguousarray(mesh_io.matmul(transfer, turn.T), dtype=np.float32)
 
 
 def obsolete(request):

@@ -78,9 +78,17 @@ def positions_of(mesh, count=None) -> np.ndarray:
     return out if count is None else out[:count]
 
 
+def matmul(a, b) -> np.ndarray:
+    """a @ b in this thread: numpy's BLAS would leave threads spinning on the cores the
+    engine's next solve needs (hemishadow.products)."""
+    from hemishadow.products import matmul as product
+
+    return product(a, b)
+
+
 def to_world(points, matrix) -> np.ndarray:
     m = np.asarray(matrix, np.float32)
-    return np.ascontiguousarray(points @ m[:3, :3].T + m[:3, 3], dtype=np.float32)
+    return np.ascontiguousarray(matmul(points, m[:3, :3].T) + m[:3, 3], dtype=np.float32)
 
 
 def mirrors(matrix) -> bool:
@@ -170,7 +178,7 @@ def frame_to_world(vertices, frame) -> np.ndarray:
     """Positions in an object's frame, back in world space (float32)."""
     if frame.rotation is None:
         return vertices
-    return np.ascontiguousarray(vertices @ frame.rotation.T + frame.offset, dtype=np.float32)
+    return np.ascontiguousarray(matmul(vertices, frame.rotation.T) + frame.offset, dtype=np.float32)
 
 
 def read_in_frame(obj, depsgraph):

@@ -79,7 +79,7 @@ def fingerprint(vertices: np.ndarray, eye=None) -> np.ndarray:
     """(_SUMS + 2 [+ 1], 3) float64: random-sign sums of the positions, their minimum and
     maximum, and the camera position when the shading depends on it (Phong)."""
     points = np.asarray(vertices, np.float64).reshape(-1, 3)
-    rows = [_signs(len(points)) @ points, points.min(axis=0, keepdims=True), points.max(axis=0, keepdims=True)]
+    rows = [mesh_io.matmul(_signs(len(points)), points), points.min(axis=0, keepdims=True), points.max(axis=0, keepdims=True)]
     if eye is not None:
         rows.append(np.asarray(eye, np.float64).reshape(1, 3))
     return np.concatenate(rows)

@@ -388,6 +388,30 @@ fn disk_cells(py: Python<'_>) -> Bound<'_, PyArray2<bool>> {
     mask_array(py, &engine::disk_mask::disk())
 }
 
+/// a (N, K) @ b (K, M) by ndarray (matrixmultiply) in the calling thread, without the GIL.
+/// numpy's OpenBLAS runs large products on its own threads, which then spin for about 0.1 s of
+/// CPU each and take the cores the engine's next solve needs (see `hemishadow.products`).
+fn product<'py, T>(py: Python<'py>, a: PyReadonlyArray2<'py, T>, b: PyReadonlyArray2<'py, T>) -> PyResult<Bound<'py, PyArray2<T>>>
+where
+    T: numpy::Element + numpy::ndarray::LinalgScalar + Send + Sync,
+{
+    let (a, b) = (a.as_array(), b.as_array());
+    if a.ncols() != b.nrows() {
+        return Err(PyValueError::new_err(format!("cannot multiply shapes {:?} and {:?}", a.shape(), b.shape())));
+    }
+    Ok(py.detach(|| a.dot(&b)).into_pyarray(py))
+}
+
+#[pyfunction]
+fn product_f32<'py>(py: Python<'py>, a: PyReadonlyArray2<'py, f32>, b: PyReadonlyArray2<'py, f32>) -> PyResult<Bound<'py, PyArray2<f32>>> {
+    product(py, a, b)
+}
+
+#[pyfunction]
+fn product_f64<'py>(py: Python<'py>, a: PyReadonlyArray2<'py, f64>, b: PyReadonlyArray2<'py, f64>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    product(py, a, b)
+}
+
 #[pymodule]
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(sh_basis, m)?)?;
@@ -396,6 +420,8 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(rasterize_local, m)?)?;
     m.add_function(wrap_pyfunction!(visibility_mask, m)?)?;
     m.add_function(wrap_pyfunction!(disk_cells, m)?)?;
+    m.add_function(wrap_pyfunction!(product_f32, m)?)?;
+    m.add_function(wrap_pyfunction!(product_f64, m)?)?;
     m.add_class::<PySolver>()?;
     m.add_class::<scene::PyScene>()?;
     m.add_class::<scene::PyBounceWeights>()?;

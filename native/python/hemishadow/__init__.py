@@ -12,6 +12,7 @@ import warnings
 import numpy as np
 
 from . import _checks, _native
+from .products import matmul
 from .sh import euler_to_matrix, rotate_sh, rotation_matrix, window_sh
 from .scene import Scene
 from .solver import TransferSolver
@@ -137,7 +138,7 @@ def shade(transfer, lighting, albedo=None):
     diffuse exitant radiance albedo / pi * irradiance."""
     t = _checks.coefficient_matrix(transfer, "transfer")
     light = _checks.float_array(lighting, "lighting", (t.shape[1], 3))
-    result = t @ light
+    result = matmul(t, light)
     if albedo is None:
         return result
     a = np.asarray(albedo)
