@@ -15,6 +15,7 @@ Time is split into Blender I/O (reading the evaluated mesh, writing attributes) 
 time (transfer, shading), per object, in `last_timings`.
 """
 
+import functools
 import itertools
 import threading
 import time
@@ -209,13 +210,21 @@ def compute_object(obj, depsgraph, scene, *, force=False, lighting=None, progres
 def to_world_transfer(transfer, rotation):
     """Transfer (V, K) computed in an object frame, turned into world space by the frame's
     rotation (3, 3) (None: already there). Exact: rotations and mirrors keep each SH band."""
-    import hemishadow
-
     if rotation is None:
         return transfer
-    k = transfer.shape[1]
-    turn = hemishadow.rotate_sh(np.eye(k, dtype=np.float32), rotation)  # (K, K): coefficients -> turned
+    turn = _turn(np.asarray(rotation, np.float64).tobytes(), transfer.shape[1])
     return np.ascontiguousarray(mesh_io.matmul(transfer, turn.T), dtype=np.float32)
+
+
+@functools.lru_cache(maxsize=64)
+def _turn(rotation: bytes, k: int) -> np.ndarray:
+    """(K, K) taking coefficients to the turned ones; kept, as objects seldom turn every frame
+    (a least-squares fit: about 1 ms, as much as a small mesh's shading)."""
+    import hemishadow
+
+    turn = hemishadow.rotate_sh(np.eye(k, dtype=np.float32), np.frombuffer(rotation).reshape(3, 3))
+    turn.flags.writeable = False
+    return turn
 
 
 def obsolete(request):
