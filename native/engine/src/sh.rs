@@ -5,12 +5,54 @@
 //! Evaluated without trigonometry: sin^m(theta) cos(m phi) = Re((x+iy)^m) and
 //! sin^m(theta) sin(m phi) = Im((x+iy)^m), so only the Legendre part Q_lm / sin^m is recursive.
 
+use std::ops::{Add, Div, Mul, Sub};
+
 use crate::error::{Error, Result};
 
 /// Largest number of bands the engine evaluates (l = 0..MAX_BANDS-1).
 pub const MAX_BANDS: usize = 8;
 /// Coefficients for `MAX_BANDS` bands.
 pub const MAX_COEFFS: usize = MAX_BANDS * MAX_BANDS;
+
+/// What `ShBasis::eval5_of` computes on: one value (f32) or `Lanes16`.
+pub trait Real: Copy + Add<Output = Self> + Sub<Output = Self> + Mul<Output = Self> + Div<Output = Self> {
+    fn splat(v: f32) -> Self;
+}
+
+impl Real for f32 {
+    #[inline(always)]
+    fn splat(v: f32) -> f32 {
+        v
+    }
+}
+
+/// 16 values with element-wise IEEE operations (no fused multiply-add): the compiler
+/// vectorizes them, and each lane has the bits the scalar code gives.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Lanes16(pub [f32; 16]);
+
+impl Real for Lanes16 {
+    #[inline(always)]
+    fn splat(v: f32) -> Self {
+        Lanes16([v; 16])
+    }
+}
+
+macro_rules! lanes16_op {
+    ($trait:ident, $method:ident, $op:tt) => {
+        impl $trait for Lanes16 {
+            type Output = Lanes16;
+            #[inline(always)]
+            fn $method(self, other: Lanes16) -> Lanes16 {
+                Lanes16(std::array::from_fn(|j| self.0[j] $op other.0[j]))
+            }
+        }
+    };
+}
+lanes16_op!(Add, add, +);
+lanes16_op!(Sub, sub, -);
+lanes16_op!(Mul, mul, *);
+lanes16_op!(Div, div, /);
 
 /// Rejects band counts outside 1..=MAX_BANDS.
 pub fn check_bands(bands: usize) -> Result<usize> {
@@ -77,40 +119,54 @@ impl ShBasis {
 
     /// Bands 0..4 with the recursion of `eval_any` expanded: Q_lm(z) / sin^m for l <= 4.
     #[inline(always)]
-    fn eval5(&self, [x, y, z]: [f32; 3], out: &mut [f32; 25]) {
-        let n = &self.norm;
+    fn eval5(&self, d: [f32; 3], out: &mut [f32; 25]) {
+        self.eval5_of(d, out);
+    }
+
+    /// `eval5` of several directions at once, lane j holding direction j: the same
+    /// operations in the same order per lane, so each lane has the bits `eval` gives.
+    #[inline(always)]
+    pub fn eval5_lanes(&self, d: [Lanes16; 3], out: &mut [Lanes16; 25]) {
+        self.eval5_of(d, out);
+    }
+
+    #[inline(always)]
+    fn eval5_of<T: Real>(&self, [x, y, z]: [T; 3], out: &mut [T; 25]) {
+        let norm = &self.norm;
+        let n = |i: usize| T::splat(norm[i]);
+        let k = T::splat;
         let (c1, s1) = (x, y);
         let (c2, s2) = (x * c1 - y * s1, x * s1 + y * c1);
         let (c3, s3) = (x * c2 - y * s2, x * s2 + y * c2);
         let (c4, s4) = (x * c3 - y * s3, x * s3 + y * c3);
         let z2 = z * z;
-        // (l, m, Q_lm / sin^m): from the appendix's recursion, (1 - 2m) factors included.
-        let q = [
-            (0, 0, 1.0),
-            (1, 0, z),
-            (1, 1, -1.0),
-            (2, 0, 1.5 * z2 - 0.5),
-            (2, 1, -3.0 * z),
-            (2, 2, 3.0),
-            (3, 0, z * (2.5 * z2 - 1.5)),
-            (3, 1, 1.5 - 7.5 * z2),
-            (3, 2, 15.0 * z),
-            (3, 3, -15.0),
-            (4, 0, (35.0 * z2 * z2 - 30.0 * z2 + 3.0) / 8.0),
-            (4, 1, z * (7.5 - 17.5 * z2)),
-            (4, 2, 52.5 * z2 - 7.5),
-            (4, 3, -105.0 * z),
-            (4, 4, 105.0),
-        ];
-        let cos_m = [1.0, c1, c2, c3, c4];
-        let sin_m = [0.0, s1, s2, s3, s4];
-        for (l, m, qlm) in q {
-            let centre = l * (l + 1);
-            out[centre + m] = n[centre + m] * qlm * cos_m[m];
-            if m > 0 {
-                out[centre - m] = n[centre - m] * qlm * sin_m[m];
-            }
+        let cos_m = [k(1.0), c1, c2, c3, c4];
+        let sin_m = [k(0.0), s1, s2, s3, s4];
+        // A macro rather than a closure: inlined into the callers' AVX2 copies.
+        macro_rules! put {
+            ($l:expr, $m:expr, $qlm:expr) => {{
+                let (centre, m, qlm): (usize, usize, T) = ($l * ($l + 1), $m, $qlm);
+                out[centre + m] = n(centre + m) * qlm * cos_m[m];
+                if m > 0 {
+                    out[centre - m] = n(centre - m) * qlm * sin_m[m];
+                }
+            }};
         }
+        put!(0, 0, k(1.0));
+        put!(1, 0, z);
+        put!(1, 1, k(-1.0));
+        put!(2, 0, k(1.5) * z2 - k(0.5));
+        put!(2, 1, k(-3.0) * z);
+        put!(2, 2, k(3.0));
+        put!(3, 0, z * (k(2.5) * z2 - k(1.5)));
+        put!(3, 1, k(1.5) - k(7.5) * z2);
+        put!(3, 2, k(15.0) * z);
+        put!(3, 3, k(-15.0));
+        put!(4, 0, (k(35.0) * z2 * z2 - k(30.0) * z2 + k(3.0)) / k(8.0));
+        put!(4, 1, z * (k(7.5) - k(17.5) * z2));
+        put!(4, 2, k(52.5) * z2 - k(7.5));
+        put!(4, 3, k(-105.0) * z);
+        put!(4, 4, k(105.0));
     }
 
     #[inline(always)]
@@ -206,6 +262,29 @@ mod tests {
             basis.eval_any(d, &mut slow, 5);
             for i in 0..25 {
                 assert!((fast[i] - slow[i]).abs() < 1e-5, "{i}: {} vs {}", fast[i], slow[i]);
+            }
+        }
+    }
+
+    #[test]
+    fn lanes_give_the_bits_of_single_directions() {
+        let basis = ShBasis::new(5).unwrap();
+        let dirs: Vec<[f32; 3]> = (0..64)
+            .map(|k| {
+                let t = k as f32 * 0.61;
+                crate::mesh::normalize([t.cos(), (2.1 * t).sin(), (0.9 * t).cos() - 0.3]).unwrap()
+            })
+            .collect();
+        for chunk in dirs.chunks(16) {
+            let lanes = [0, 1, 2].map(|a| Lanes16(std::array::from_fn(|j| chunk[j][a])));
+            let mut out = [Lanes16([0.0; 16]); 25];
+            basis.eval5_lanes(lanes, &mut out);
+            for (j, d) in chunk.iter().enumerate() {
+                let mut one = [0.0f32; 25];
+                basis.eval(*d, &mut one);
+                for i in 0..25 {
+                    assert_eq!(out[i].0[j].to_bits(), one[i].to_bits(), "Y_{i}({d:?})");
+                }
             }
         }
     }
