@@ -209,7 +209,9 @@ def _lobe_inputs(lamp, vertices):
     d2 = np.einsum("ij,ij->i", offset, offset)
     d = np.sqrt(np.maximum(d2, 1e-20))
     s = offset / d[:, None]
-    cos_off_axis = -(s @ lamp.axis)  # angle between the lamp's axis and the lamp -> vertex direction
+    # Angle between the lamp's axis and the lamp -> vertex direction; einsum, as numpy < 2 hands
+    # this product to BLAS threads that then spin on the engine's cores (hemishadow.products).
+    cos_off_axis = -np.einsum("ij,j->i", s, lamp.axis)
     if lamp.kind == "AREA":
         # Projected area seen from the vertex; a disk of that area on the axis subtends
         # 2 pi (1 - 1/sqrt(1 + A cos/(pi d^2))), exact there and bounded by the hemisphere.
