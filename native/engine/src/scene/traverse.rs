@@ -11,7 +11,7 @@
 
 use crate::disk_mask::Mask;
 use crate::mesh::Vec3;
-use crate::packets::Packet;
+use crate::packets::{Packet, LANES};
 use crate::plane_table::PlaneTable;
 use crate::rasterizer::{above_horizon, dot, lanes_above_horizon, LocalCorners, TriangleBatch};
 use crate::transfer::Receiver;
@@ -100,14 +100,15 @@ impl Local {
     /// so packets and single triangles give the same corners bit for bit.
     #[inline(always)]
     fn apply_packet(&self, packet: &Packet) -> LocalCorners {
-        // Built in place rather than zeroed and filled: the zeroing was a memset call per packet.
-        std::array::from_fn(|k| {
-            let corner = &packet.corners[k];
-            std::array::from_fn(|r| {
-                let row = self.rows[r];
-                std::array::from_fn(|i| row[0] * corner[0][i] + row[1] * corner[1][i] + row[2] * corner[2][i] + self.shift[r])
-            })
-        })
+        let mut corners: LocalCorners = [[[0.0; LANES]; 3]; 3];
+        for (k, corner) in packet.corners.iter().enumerate() {
+            for (r, row) in self.rows.iter().enumerate() {
+                for i in 0..LANES {
+                    corners[k][r][i] = row[0] * corner[0][i] + row[1] * corner[1][i] + row[2] * corner[2][i] + self.shift[r];
+                }
+            }
+        }
+        corners
     }
 
     /// A lower bound of the squared distance from the receiver to anything in a node's slab.
