@@ -14,7 +14,7 @@ pub const MAX_BANDS: usize = 8;
 /// Coefficients for `MAX_BANDS` bands.
 pub const MAX_COEFFS: usize = MAX_BANDS * MAX_BANDS;
 
-/// What `ShBasis::eval5_of` computes on: one value (f32) or `Lanes16`.
+/// What `ShBasis::eval5` computes on: one value (f32) or `Lanes16`.
 pub trait Real: Copy + Add<Output = Self> + Sub<Output = Self> + Mul<Output = Self> + Div<Output = Self> {
     fn splat(v: f32) -> Self;
 }
@@ -117,21 +117,17 @@ impl ShBasis {
         }
     }
 
-    /// Bands 0..4 with the recursion of `eval_any` expanded: Q_lm(z) / sin^m for l <= 4.
-    #[inline(always)]
-    fn eval5(&self, d: [f32; 3], out: &mut [f32; 25]) {
-        self.eval5_of(d, out);
-    }
-
     /// `eval5` of several directions at once, lane j holding direction j: the same
     /// operations in the same order per lane, so each lane has the bits `eval` gives.
     #[inline(always)]
     pub fn eval5_lanes(&self, d: [Lanes16; 3], out: &mut [Lanes16; 25]) {
-        self.eval5_of(d, out);
+        self.eval5(d, out);
     }
 
+    /// Bands 0..4 with the recursion of `eval_any` expanded: Q_lm(z) / sin^m for l <= 4, of
+    /// one direction (f32) or of 16 (`Lanes16`).
     #[inline(always)]
-    fn eval5_of<T: Real>(&self, [x, y, z]: [T; 3], out: &mut [T; 25]) {
+    fn eval5<T: Real>(&self, [x, y, z]: [T; 3], out: &mut [T; 25]) {
         let norm = &self.norm;
         let n = |i: usize| T::splat(norm[i]);
         let k = T::splat;

@@ -2,7 +2,7 @@
 
 numpy hands a product above about 2.6e5 multiply-adds to OpenBLAS's threads, and each of
 them then spins for about 0.1 s of CPU waiting for more work: on a 2-core machine that is a
-core taken from the engine's next solve. Measured on the Blender demo (a 1,369-vertex cloth
+core taken from the engine's next solve. Measured on the Blender demo (a 1,444-vertex cloth
 whose transfer is turned to world space every frame): 100 ms a frame against 70 ms with
 OpenBLAS held to one thread. These products run in the calling thread instead (ndarray's
 matrixmultiply, in the engine's module), with the same numbers as numpy's to rounding.
