@@ -58,8 +58,9 @@ def job_arguments(context, kind):
         layout = (["--atlas", settings.atlas_name, "--islands", settings.uv_name]
                   if settings.layout == "ATLAS" and len(objects) > 1 else ["--uv", settings.uv_name])
         return ["--objects", *[o.name for o in objects], *layout, *size, "--basis", settings.basis,
-                "--bounces", str(settings.bounces), "--samples", str(settings.samples), "--margin",
-                str(settings.margin), "--scene", scene.name, *out]
+                "--bounces", str(settings.bounces), "--samples", str(settings.samples),
+                *([] if settings.adaptive else ["--uniform"]), "--margin", str(settings.margin), "--scene", scene.name,
+                *out]
     if kind == "panorama":
         where = panorama_settings.bake_arguments(scene)
         if where.get("at") is not None:

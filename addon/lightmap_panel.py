@@ -44,6 +44,7 @@ class HEMISHADOW_PT_lightmaps(bpy.types.Panel):
         layout.prop(settings, "basis")
         layout.prop(settings, "bounces")
         layout.prop(settings, "samples")
+        layout.prop(settings, "adaptive")
         layout.prop(settings, "margin")
         layout.prop(settings, "directory")
         layout.label(text=f"{len(objects)} mesh object(s)", icon="OBJECT_DATA")

@@ -2,7 +2,7 @@
 how; the Bake Lightmaps operator and `lightmaps.bake_lightmaps` take the same values."""
 
 import bpy
-from bpy.props import EnumProperty, FloatProperty, IntProperty, PointerProperty, StringProperty
+from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty, StringProperty
 
 from . import lightmap_atlas, lightmaps
 
@@ -35,6 +35,8 @@ class HemishadowLightmapSettings(bpy.types.PropertyGroup):
         ("flat", "Flat", "flat and ao")])
     bounces: IntProperty(name="Bounces", default=2, min=0, max=16, description="Diffuse bounces (0: direct only)")
     samples: IntProperty(name="Samples", default=4, min=1, max=64, description="Supersamples per texel, in total")
+    adaptive: BoolProperty(name="Adaptive Samples", default=True,
+                           description="All samples only where a texel's light departs from its neighbours' (shadow and contact edges, island rims); elsewhere one sample at its centre")
     margin: IntProperty(name="Margin", default=2, min=0, max=64, description="Padding around islands, in texels")
     directory: StringProperty(name="Folder", default="", subtype="DIR_PATH",
                               description="Where <object>.exr goes (empty: //lightmaps beside the .blend; "
@@ -55,7 +57,8 @@ def bake_arguments(settings):
     density = settings.size_mode == "DENSITY"
     return dict(uv_name=settings.uv_name, resolution=settings.resolution,
                 texel_density=settings.texel_density if density else None, basis=settings.basis,
-                bounces=settings.bounces, samples=settings.samples, margin=settings.margin, layout=settings.layout,
+                bounces=settings.bounces, samples=settings.samples, adaptive=settings.adaptive, margin=settings.margin,
+                layout=settings.layout,
                 atlas_name=settings.atlas_name)
 
 

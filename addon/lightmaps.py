@@ -346,7 +346,7 @@ def atlas_resolution(objects, source_uv, resolution, texel_density, margin):
 
 
 def prepare(scene, objects, *, uv_name=DEFAULT_UV, resolution=256, texel_density=None, basis="hl2", bounces=2,
-            samples=4, margin=2, layout="ATLAS", atlas_name=None, depsgraph=None):
+            samples=4, adaptive=True, margin=2, layout="ATLAS", atlas_name=None, depsgraph=None):
     """Reads the objects, blockers, materials, World and suns (warnings for shared meshes,
     missing textures); raises ValueError naming the object for unusable input. Changes nothing,
     except for an atlas (layout="ATLAS" and several objects): the baker's own UV map
@@ -393,7 +393,8 @@ def prepare(scene, objects, *, uv_name=DEFAULT_UV, resolution=256, texel_density
     targets, resolutions = [p[0] for p in pairs], [p[1] for p in pairs]
     others = [s for name, s in surfaces.items() if name not in baked]
     return Prepared(engine_scene, targets, others, lighting_of(scene), suns_of(scene), resolutions,
-                    dict(bounces=bounces, samples=samples, margin=margin, basis=basis, lamps=lamps_of(scene),
+                    dict(bounces=bounces, samples=samples, adaptive=adaptive, margin=margin, basis=basis,
+                         lamps=lamps_of(scene),
                          atlas=atlas is not None), atlas)
 
 
@@ -457,8 +458,8 @@ def finish(prepared, results, out_dir=None, images=True):
 
 
 def bake_lightmaps(scene, objects, *, uv_name=DEFAULT_UV, resolution=256, texel_density=None, basis="hl2", bounces=2,
-                   samples=4, margin=2, layout="ATLAS", atlas_name=None, out_dir=None, depsgraph=None, progress=None,
-                   images=True):
+                   samples=4, adaptive=True, margin=2, layout="ATLAS", atlas_name=None, out_dir=None, depsgraph=None,
+                   progress=None, images=True):
     """Bakes the objects' lightmaps; returns {object or atlas name: EXR path or None}.
 
     Writes `DIR/<object>.exr` (layers as docs/lightmaps.md) when a folder is known
@@ -471,6 +472,6 @@ def bake_lightmaps(scene, objects, *, uv_name=DEFAULT_UV, resolution=256, texel_
     when `progress` returns False (nothing is written: files and images are written only once
     every map is baked). The plain path of the modal operator (lightmap_job.py)."""
     prepared = prepare(scene, objects, uv_name=uv_name, resolution=resolution, texel_density=texel_density,
-                       basis=basis, bounces=bounces, samples=samples, margin=margin, layout=layout,
+                       basis=basis, bounces=bounces, samples=samples, adaptive=adaptive, margin=margin, layout=layout,
                        atlas_name=atlas_name, depsgraph=depsgraph)
     return finish(prepared, compute(prepared, progress), out_dir, images)

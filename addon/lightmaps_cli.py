@@ -36,6 +36,9 @@ def add_parser(commands):
                    help="hl2: flat, b0-b2, ao; sh: flat, sh0-sh3, ao; flat: flat, ao (default: hl2)")
     p.add_argument("--bounces", type=int, default=2, metavar="N", help="diffuse bounces, 0 = direct only (default: 2)")
     p.add_argument("--samples", type=int, default=4, metavar="N", help="supersamples per texel, in total (default: 4)")
+    p.add_argument("--uniform", action="store_true",
+                   help="all samples in every texel (default: adaptive, all samples only where a texel's light "
+                        "departs from its neighbours', one at its centre elsewhere)")
     p.add_argument("--margin", type=int, default=2, metavar="PX", help="padding around islands (default: 2)")
     p.add_argument("--out", metavar="DIR", help="folder of the EXR files (default: //lightmaps beside the .blend)")
     p.add_argument("--scene", metavar="NAME", help="scene to use (default: the active scene)")
@@ -76,7 +79,8 @@ def run(scene, found, args, progress):
         written = lightmaps.bake_lightmaps(scene, found, uv_name=args.uv or args.islands,
                                            layout=layout, atlas_name=args.atlas, resolution=args.resolution,
                                            texel_density=args.texel_density, basis=args.basis, bounces=args.bounces,
-                                           samples=args.samples, margin=args.margin, out_dir=args.out,
+                                           samples=args.samples, adaptive=not args.uniform, margin=args.margin,
+                                           out_dir=args.out,
                                            progress=progress, images=False)
     for warning in caught:
         print(f"hemishadow: warning: {warning.message}", file=sys.stderr)

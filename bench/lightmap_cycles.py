@@ -5,7 +5,7 @@ texels brighter than 1 % of the open-sky value, and both times.
 
     PYTHONPATH=native/python .venv/bin/python bench/lightmap_cycles.py [--resolution 32]
         [--samples 1024] [--bounces 0] [--no-sun] [--cuts N] [--map flat|b0|b1|b2]
-        [--scene floor|room|corner] [--lamp none|point|spot|area] [--sweep 16,64,256]
+        [--scene floor|room|corner] [--lamp none|point|spot|area] [--sweep 16,64,256] [--uniform]
 
 --scene room: a closed 4 x 4 x 2.5 m room with a window in its +X wall, a table and a cabinet
 (sky and sun come in through the window); corner: a ground with two walls meeting at a corner
@@ -217,6 +217,7 @@ def main(argv=None):
     parser.add_argument("--scene", choices=("floor", "room", "corner"), default="floor")
     parser.add_argument("--lamp", choices=("none",) + tuple(LAMPS), default="none")
     parser.add_argument("--ours-samples", type=int, default=4, help="our supersamples per texel")
+    parser.add_argument("--uniform", action="store_true", help="ours with every sample in every texel (not adaptive)")
     parser.add_argument("--sweep", default="", help="Cycles sample counts to time against ours, e.g. 16,64,256")
     args = parser.parse_args(argv)
     vector = None if args.map == "flat" else lm.HL2[int(args.map[1])]
@@ -226,8 +227,9 @@ def main(argv=None):
         t0 = time.perf_counter()
         ours = lm.read_exr(lightmaps.bake_lightmaps(scene, [floor], resolution=args.resolution,
                                                     basis="flat" if args.map == "flat" else "hl2",
-                                                    bounces=args.bounces, samples=args.ours_samples, margin=2,
-                                                    out_dir=folder, images=False)["Floor"])
+                                                    bounces=args.bounces, samples=args.ours_samples,
+                                                    adaptive=not args.uniform, margin=2, out_dir=folder,
+                                                    images=False)["Floor"])
         ours_seconds = time.perf_counter() - t0
     reference, cycles_seconds = cycles_bake(scene, floor, material, args.resolution, args.samples, args.bounces, 2)
     covered = ours["coverage"] > 0

@@ -11,7 +11,7 @@ import bpy
 from .. import lightmap_atlas, lightmap_job, lightmap_nodes, lightmap_settings, lightmaps
 from .modal_job import ModalJob
 
-_OVERRIDABLE = ("uv_name", "resolution", "basis", "bounces", "samples", "margin", "layout", "atlas_name")
+_OVERRIDABLE = ("uv_name", "resolution", "basis", "bounces", "samples", "adaptive", "margin", "layout", "atlas_name")
 
 
 def _report_warnings(operator, messages):
@@ -55,6 +55,8 @@ class HEMISHADOW_OT_bake_lightmaps(ModalJob, bpy.types.Operator):
         ("flat", "Flat", "flat and ao")])
     bounces: bpy.props.IntProperty(name="Bounces", default=2, min=0, max=16)
     samples: bpy.props.IntProperty(name="Samples", default=4, min=1, max=64, description="Supersamples per texel")
+    adaptive: bpy.props.BoolProperty(name="Adaptive Samples", default=True,
+                                     description="All samples only where a texel's light departs from its neighbours' (shadow and contact edges, island rims); elsewhere one sample at its centre")
     margin: bpy.props.IntProperty(name="Margin", default=2, min=0, max=64, description="Padding in texels")
     layout: bpy.props.EnumProperty(name="Layout", default="ATLAS", items=[
         ("ATLAS", "Atlas", "Several objects share one image through the UV map hemishadow_lightmap"),

@@ -156,8 +156,8 @@ def test_panel_shows_settings_warnings_and_buttons(scene):
 
     items = draw([floor, bare])
     props = [name for kind, name in items if kind == "prop"]
-    assert props == ["source", "layout", "atlas_name", "uv_name", "size_mode", "resolution", "basis", "bounces", "samples", "margin",
-                     "directory"]
+    assert props == ["source", "layout", "atlas_name", "uv_name", "size_mode", "resolution", "basis", "bounces", "samples",
+                     "adaptive", "margin", "directory"]
     assert ("label", "No 'lightmap' UV map (Lightmap Pack in the atlas): Bare") in items  # two objects: an atlas
     scene.hemishadow_lightmaps.layout = "OBJECT"
     assert ("label", "No 'lightmap' UV map: Bare") in draw([floor, bare])

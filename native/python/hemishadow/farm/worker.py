@@ -289,7 +289,8 @@ def _lightmaps(unit):
         prepared = lightmaps.prepare(scene, found, uv_name=args.uv or args.islands,
                                      layout="ATLAS" if _atlas(args, found) else "OBJECT", atlas_name=args.atlas,
                                      resolution=args.resolution, texel_density=args.texel_density, basis=args.basis,
-                                     bounces=args.bounces, samples=args.samples, margin=args.margin)
+                                     bounces=args.bounces, samples=args.samples, adaptive=not args.uniform,
+                                     margin=args.margin)
     if prepared.atlas:
         t1 = time.perf_counter()
         maps = lightmaps.compute(prepared)[0]

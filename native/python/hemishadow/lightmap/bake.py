@@ -11,6 +11,7 @@ before filling. See docs/lightmaps.md.
 
 import time
 import warnings
+from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
@@ -18,6 +19,7 @@ from .. import Cancelled
 from . import basis as frames
 from . import atlas as atlases
 from . import bounce, cells, dilate, geometry, lamps as lamp_models, light, seams, texels
+from . import refine as refinement
 from .geometry import Surface, Target
 
 BASES = ("hl2", "sh", "flat")
@@ -53,10 +55,13 @@ def checked_suns(suns):
     return out
 
 
+_BITS_OF_BYTE = np.array([bin(b).count("1") for b in range(256)], np.uint8)
+
+
 def blocked_cells(masks):
-    """Set bits per packed mask (P, 16) uint64. Not np.bitwise_count: Blender 4.2-4.4 bundle
-    numpy 1.26, which does not have it."""
-    return np.unpackbits(np.ascontiguousarray(masks).view(np.uint8), axis=1).sum(axis=1, dtype=np.int64)
+    """Set bits per packed mask (P, 16) uint64, a byte at a time. Not np.bitwise_count:
+    Blender 4.2-4.4 bundle numpy 1.26, which does not have it."""
+    return _BITS_OF_BYTE[np.ascontiguousarray(masks).view(np.uint8)].sum(axis=1, dtype=np.int64)
 
 
 class Steps:
@@ -192,18 +197,19 @@ def _sample_geometry(target, resolution, samples, check=None):
     return tx, points, ng[tx.triangle], (t, b, n), tris, uv
 
 
-def _texel_maps(tx, resolution, values, valid):
-    """Mean of the valid samples of each texel: (R, R, C) and the texels that had one."""
+def _texel_maps(texel, resolution, values, valid):
+    """Mean of the valid samples of each texel (`texel`: of each sample): (R, R, C) and the
+    texels that had one."""
     r2 = resolution * resolution
-    count = np.bincount(tx.texel[valid], minlength=r2)
-    out = np.stack([np.bincount(tx.texel[valid], values[valid, c], r2) for c in range(values.shape[1])], axis=1)
+    count = np.bincount(texel[valid], minlength=r2)
+    out = np.stack([np.bincount(texel[valid], values[valid, c], r2) for c in range(values.shape[1])], axis=1)
     out = out / np.maximum(count, 1)[:, None]
     return out.reshape(resolution, resolution, -1).astype(np.float32), (count > 0).reshape(resolution, resolution)
 
 
 def bake(scene, targets, *, resolution, lighting=None, suns=(), lamps=(), surfaces=(), bounces=2, samples=4, margin=2,
-         basis="hl2", offset=None, stitch_seams=True, adaptive_suns=True, lamp_points=16, atlas=False,
-         progress=None):
+         basis="hl2", offset=None, stitch_seams=True, adaptive=True, contrast=refinement.CONTRAST, adaptive_suns=True,
+         lamp_points=16, atlas=False, progress=None):
     """Bakes lightmaps of `targets` (`Target`s) in `scene` (a `hemishadow.Scene` holding every
     blocker); returns one dict of maps per target (see the module docstring), or with
     atlas=True a list of one dict: the map all targets share (`atlas.py`).
@@ -221,11 +227,18 @@ def bake(scene, targets, *, resolution, lighting=None, suns=(), lamps=(), surfac
         grid, g = round(sqrt(lamp_points))); lamps without size use one.
     surfaces: `Surface`s of the meshes that reflect or emit light besides the targets' own
         (bounce receivers at their vertices); meshes not described stay black (block only).
-    bounces: diffuse bounces (0: direct light only). samples: supersamples per texel, in total.
+    bounces: diffuse bounces (0: direct light only). samples: supersamples per texel, in total
+        (a g x g grid when a square, else a low-discrepancy sequence).
+    adaptive: light every texel at its centre first and give all `samples` only to texels
+        where that is not enough (`refine.py`: shadow and contact edges, light curving across
+        the texel, rims of UV islands, texels inside or beside solid geometry, where the
+        light departs from its neighbours' by more than `contrast`); False: every sample of
+        every texel.
     margin: texels of padding around islands. basis: "hl2" (flat, b0-b2, ao), "sh" (flat,
         sh0-sh3, ao) or "flat" (flat, ao). offset: the receivers' lift (`Scene`'s default).
-    adaptive_suns: a sun ray per texel first, then per sample where neighbours disagree
-        (`_sun_lit`); False: a ray per sample. stitch_seams: match texels across UV seams.
+    adaptive_suns: with adaptive=False, a sun ray per texel first, then per sample where
+        neighbours disagree (`_sun_lit`); False: a ray per sample. stitch_seams: match
+        texels across UV seams.
     progress: None or a callable taking the fraction done; returning False raises
         `hemishadow.Cancelled` and nothing is returned.
     """
@@ -233,6 +246,8 @@ def bake(scene, targets, *, resolution, lighting=None, suns=(), lamps=(), surfac
     if atlas and len(set(sizes)) != 1:
         raise ValueError(f"an atlas has one resolution, got {sorted(set(sizes))}")
     samples = positive_int(samples, "samples")
+    if not (np.isfinite(contrast) and contrast > 0):
+        raise ValueError(f"contrast must be a positive number, got {contrast!r}")
     margin = positive_int(margin, "margin", 0)
     bounces = positive_int(bounces, "bounces", 0)
     if basis not in BASES:
@@ -247,55 +262,129 @@ def bake(scene, targets, *, resolution, lighting=None, suns=(), lamps=(), surfac
 
     setup = Steps(progress, 1)  # before the totals are known: reports of nothing done, for a cancel
     geo = [_sample_geometry(tg, r, samples, setup.check) for tg, r in zip(targets, sizes)]
-    points = np.concatenate([g[1] for g in geo])
-    if not len(points):
+    full = _Samples.of(geo, sizes, atlas, basis)
+    if not len(full.points):
         raise ValueError(f"the lightmap UVs cover no texel of the {max(sizes)} x {max(sizes)} map: "
                          "nothing to bake")
-    ng = np.concatenate([g[2] for g in geo])
-    t, b, n = (np.concatenate([g[3][k] for g in geo]) for k in range(3))
-    index = np.concatenate([g[0].index for g in geo])
+    centres = None
+    if adaptive and samples > 1:
+        centres = _Samples.of([_sample_geometry(tg, r, 1, setup.check) for tg, r in zip(targets, sizes)], sizes,
+                              atlas, basis)
     cells.moments(setup.check)  # cached: computed once per process
     scene.prepare()  # the engine's scene build (once per scene; it cannot be interrupted)
-    setup.check()
-    lobes = n[:, None] if basis != "hl2" else np.concatenate([n[:, None], frames.hl2_world(t, b, n)], axis=1)
     setup.check()
 
     receivers = bounce_receivers(targets, surfaces) if (bounces or emitters(targets, surfaces)) else []
     vertex_count = sum(len(r[1]) for r in receivers)
-    steps = Steps(progress, 2 * len(points) + vertex_count * (1 + bounces) + len(points) * bool(receivers))
-    usable = np.linalg.norm(ng, axis=1) > 0.5  # zero-area triangles have no normal
-    ng = np.where(usable[:, None], ng, n)
-    masks, valid = _masks_and_valid(scene, points, ng, offset, steps)
-    valid &= usable
-    r = max(sizes)
-    if atlas:  # one map: (row, col) of the shared grid
-        texel_id, layers = np.concatenate([g[0].texel for g in geo]), 1
-    else:  # (target, row, col) in a T x r x r grid
-        texel_id, layers = np.concatenate([(k * r + g[0].texel // sz) * r + g[0].texel % sz
-                                           for k, (g, sz) in enumerate(zip(geo, sizes))]), len(geo)
-    grid = (texel_id, (layers, r, r)) if adaptive_suns else None
-    maps, ao, sh = direct_light(scene, points, ng, lobes, lighting, direct_suns, index, offs, want_sh, offset, steps, masks,
-                           texel_grid=grid, lamps=direct_lamps, lamp_points=lamp_points)
+    first = 0 if centres is None else len(centres.points)
+    steps = Steps(progress, 2 * (first + len(full.points)) + vertex_count * (1 + bounces) + len(full.points) * bool(receivers))
+    light_args = dict(lighting=lighting, suns=direct_suns, lamps=direct_lamps, lamp_points=lamp_points, want_sh=want_sh,
+                      offset=offset, steps=steps)
+    if centres is None:
+        lit = _light(scene, full, offs, adaptive_suns=adaptive_suns, **light_args)
+    else:
+        lit = _refined(scene, centres, full, offs, contrast, steps, light_args)
     if receivers:
-        gathered = _indirect(scene, receivers, points, ng, valid, texel_id, lighting, suns, lamps, offs, bounces,
-                             offset, steps)
+        gathered = _indirect(scene, receivers, lit.points, lit.ng, lit.valid, lit.cell, lighting, suns, lamps,
+                             bounces, offset, steps)
         if gathered is not None:
-            for s in steps.chunks(len(points), weight=0):
-                maps[s] += bounce.lobe_irradiance(gathered[s], lobes[s])
+            for s in steps.chunks(len(lit.points), weight=0):
+                lit.maps[s] += bounce.lobe_irradiance(gathered[s], lit.lobes[s])
                 if want_sh:
-                    sh[s] += gathered[s, :4] / np.float32(np.pi)
+                    lit.sh[s] += gathered[s, :4] / np.float32(np.pi)
 
     names = ["flat"] + (["b0", "b1", "b2"] if basis == "hl2" else []) + (["sh0", "sh1", "sh2", "sh3"] if want_sh else [])
-    values = np.concatenate([maps.reshape(len(points), -1)] + ([sh.reshape(len(points), -1)] if want_sh else [])
-                            + [ao[:, None]], axis=1)
-    ends = np.cumsum([len(g[0].texel) for g in geo])
+    values = np.concatenate([lit.maps.reshape(len(lit.points), -1)]
+                            + ([lit.sh.reshape(len(lit.points), -1)] if want_sh else []) + [lit.ao[:, None]], axis=1)
+    parts = [(lit.target == k, tx, tris, uv) for k, (tx, *_rest, tris, uv) in enumerate(geo)]
     if atlas:
-        parts = [(tx, values[end - len(tx.texel):end], valid[end - len(tx.texel):end], tris, uv)
-                 for (tx, *_rest, tris, uv), end in zip(geo, ends)]
-        return [_finish_atlas(parts, sizes[0], names, margin, stitch_seams, steps)]
-    return [_finish(tx, r, values[end - len(tx.texel):end], valid[end - len(tx.texel):end], tris, uv, names, margin,
-                    stitch_seams, steps)
-            for r, (tx, *_rest, tris, uv), end in zip(sizes, geo, ends)]
+        return [_finish_atlas([(lit.texel[of], tx, values[of], lit.valid[of], tris, uv) for of, tx, tris, uv in parts],
+                              sizes[0], names, margin, stitch_seams, steps)]
+    return [_finish(lit.texel[of], tx, r, values[of], lit.valid[of], tris, uv, names, margin, stitch_seams, steps)
+            for r, (of, tx, tris, uv) in zip(sizes, parts)]
+
+
+@dataclass
+class _Samples:
+    """Receiver samples of every target, in target order: world position, geometric normal,
+    shading frame and lobes, which of its texel's sample positions each is (`index`), its
+    `target`, its texel in the target's map (`texel`) and in the bake's (layers, R, R) grid
+    (`cell`), whether that texel's centre lies in a UV triangle (`covered`), whether its
+    triangle has a normal (`usable`: zero-area ones take the shading normal). Once lit
+    (`_light`), also `valid`, `maps`, `ao` and `sh`."""
+    points: np.ndarray
+    ng: np.ndarray
+    t: np.ndarray
+    b: np.ndarray
+    n: np.ndarray
+    lobes: np.ndarray
+    index: np.ndarray
+    target: np.ndarray
+    texel: np.ndarray
+    cell: np.ndarray
+    covered: np.ndarray
+    usable: np.ndarray
+    shape: tuple
+    valid: np.ndarray = None
+    maps: np.ndarray = None
+    ao: np.ndarray = None
+    sh: np.ndarray = None
+
+    @classmethod
+    def of(cls, geo, sizes, atlas, basis):
+        """The samples of `_sample_geometry`'s results (one per target)."""
+        r = max(sizes)
+        t, b, n = (np.concatenate([g[3][k] for g in geo]) for k in range(3))
+        ng = np.concatenate([g[2] for g in geo])
+        usable = np.linalg.norm(ng, axis=1) > 0.5
+        ng = np.where(usable[:, None], ng, n)
+        lobes = n[:, None] if basis != "hl2" else np.concatenate([n[:, None], frames.hl2_world(t, b, n)], axis=1)
+        texel = np.concatenate([g[0].texel for g in geo])
+        target = np.concatenate([np.full(len(g[0].texel), k) for k, g in enumerate(geo)])
+        if atlas:  # one map: (row, col) of the shared grid
+            cell, layers = texel, 1
+        else:  # (target, row, col) in a T x r x r grid
+            size = np.asarray(sizes)[target]
+            cell, layers = (target * r + texel // size) * r + texel % size, len(geo)
+        covered = np.concatenate([g[0].coverage.reshape(-1)[g[0].texel] for g in geo])
+        return cls(np.concatenate([g[1] for g in geo]), ng, t, b, n, lobes, np.concatenate([g[0].index for g in geo]),
+                   target, texel, cell, covered, usable, (layers, r, r))
+
+    def take(self, keep):
+        return replace(self, **{f.name: getattr(self, f.name)[keep] for f in fields(self)
+                                if isinstance(getattr(self, f.name), np.ndarray)})
+
+    def joined(self, other):
+        return replace(self, **{f.name: np.concatenate([getattr(self, f.name), getattr(other, f.name)])
+                                for f in fields(self) if isinstance(getattr(self, f.name), np.ndarray)})
+
+
+def _light(scene, samples, offsets, *, lighting, suns, lamps, lamp_points, want_sh, offset, steps, adaptive_suns=False):
+    """The samples lit by direct light: `valid` (inside solid geometry or not), `maps`, `ao`, `sh`."""
+    masks, valid = _masks_and_valid(scene, samples.points, samples.ng, offset, steps)
+    valid &= samples.usable
+    grid = (samples.cell, samples.shape) if adaptive_suns else None
+    maps, ao, sh = direct_light(scene, samples.points, samples.ng, samples.lobes, lighting, suns, samples.index, offsets,
+                                want_sh, offset, steps, masks, texel_grid=grid, lamps=lamps, lamp_points=lamp_points)
+    return replace(samples, valid=valid, maps=maps, ao=ao, sh=sh if want_sh else None)
+
+
+def _refined(scene, centres, full, offsets, contrast, steps, light_args):
+    """Adaptive supersampling (`refine.py`): every texel lit at its centre, then all the
+    samples of the texels where that is not enough; one set of samples, each texel's either."""
+    lit = _light(scene, centres, texels.offsets(1), **light_args)
+    cells_count = int(np.prod(centres.shape))
+    values = np.zeros((cells_count, lit.maps[0].size + 1), np.float32)
+    values[centres.cell] = np.concatenate([lit.maps.reshape(len(lit.ao), -1), lit.ao[:, None]], axis=1)
+    usable = np.zeros(cells_count, bool)
+    usable[centres.cell] = centres.covered & lit.valid
+    refine = refinement.texels_to_refine(values.reshape(centres.shape + (-1,)), usable.reshape(centres.shape),
+                                         contrast).reshape(-1)
+    more = refine[full.cell]
+    steps.step(2 * int((~more).sum()))  # the samples of texels that keep their centre's light
+    if not more.any():
+        return lit
+    return lit.take(~refine[centres.cell]).joined(_light(scene, full.take(more), offsets, **light_args))
 
 
 def _targets_and_sizes(targets, resolution):
@@ -331,7 +420,7 @@ def vertex_bounce(scene, receivers, lighting, suns, lamps, bounces, offset, step
     return bounce.vertex_radiance(scene, receivers, direct, bounces, offset, steps=steps, record=record)
 
 
-def _indirect(scene, receivers, points, ng, valid, texel_id, lighting, suns, lamps, offsets, bounces, offset, steps):
+def _indirect(scene, receivers, points, ng, valid, texel_id, lighting, suns, lamps, bounces, offset, steps):
     """Gathered SH (P, 9, 3) of the light the samples receive from the surfaces after
     `bounces` passes, gathered once per texel; None when every surface is black."""
     radiance = vertex_bounce(scene, receivers, lighting, suns, lamps, bounces, offset, steps)
@@ -379,10 +468,11 @@ def _representatives(texel_id, valid):
     return rep, of_sample
 
 
-def _finish(tx, resolution, values, valid, tris, uv, names, margin, stitch_seams, steps=None):
-    """Texel means, invalid texels filled, padding, seams; the dict of named maps."""
+def _finish(texel, tx, resolution, values, valid, tris, uv, names, margin, stitch_seams, steps=None):
+    """Texel means of the samples (`texel`: of each), invalid texels filled, padding, seams
+    (islands and coverage from `tx`); the dict of named maps."""
     check = steps.check if steps is not None else None
-    image, known = _texel_maps(tx, resolution, values, valid)
+    image, known = _texel_maps(texel, resolution, values, valid)
     had_valid = known.copy()
     dilate.fill(image, known, tx.island, check)
     dilate.dilate(image, known, margin, check)
@@ -396,15 +486,15 @@ def _finish_atlas(parts, resolution, names, margin, stitch_seams, steps):
     """`_finish` for targets sharing one map (`atlas.compose`); `valid` and `coverage` are
     the union of the targets'."""
     pieces, had_valid, coverage = [], np.zeros((resolution,) * 2, bool), np.zeros((resolution,) * 2, bool)
-    for tx, values, valid, _, _ in parts:
-        image, known = _texel_maps(tx, resolution, values, valid)
+    for texel, tx, values, valid, _, _ in parts:
+        image, known = _texel_maps(texel, resolution, values, valid)
         pieces.append((image, known, tx.island))
         had_valid |= known
         coverage |= tx.coverage
         steps.step(0)
     image, known, _ = atlases.compose(pieces, resolution, pieces[0][0].shape[2], margin, steps.check)
     if stitch_seams:
-        for _, _, _, tris, uv in parts:
+        for *_, tris, uv in parts:
             seams.stitch(image, known, *seams.seam_points(tris, uv, resolution), check=steps.check)
     return _named(image, names, coverage, had_valid)
 

@@ -1,0 +1,103 @@
+"""Adaptive supersampling of lightmaps (issue 11, `hemishadow.lightmap.refine`): which texels
+get all their samples, and what the bake gives with it against a sample everywhere."""
+
+import math
+
+import numpy as np
+import pytest
+
+pytest.importorskip("hemishadow")
+from hemishadow.lightmap import Sun, Surface, Target, bake, refine  # noqa: E402
+
+from test_lightmap import cube, grid_plane, scene_of, uniform_sky  # noqa: E402
+
+
+def field(values, usable=None):
+    """(1, R, R, 1) values and (1, R, R) usable centres (all by default)."""
+    values = np.asarray(values, np.float32)
+    usable = np.ones(values.shape, bool) if usable is None else usable
+    return values[None, ..., None], usable[None]
+
+
+def interior(r):
+    inside = np.zeros((r, r), bool)
+    inside[1:-1, 1:-1] = True
+    return inside
+
+
+def test_linear_light_of_any_slope_refines_only_the_map_edge():
+    y, x = np.mgrid[0:16, 0:16]
+    for slope in (0.001, 0.05, 0.5):
+        refined = refine.texels_to_refine(*field(1 + slope * (3 * x + 2 * y)))[0]
+        assert refined[~interior(16)].all()  # no neighbour beyond the map's edge
+        assert not refined[interior(16)].any()
+
+
+def test_an_edge_refines_the_texels_on_both_sides_only():
+    light = np.where(np.arange(16)[None, :] < 8, 1.0, 0.6) * np.ones((16, 1))
+    refined = refine.texels_to_refine(*field(light))[0] & interior(16)
+    assert np.array_equal(np.nonzero(refined.any(axis=0))[0], [7, 8])
+
+
+def test_curving_light_refines_where_it_bends_more_than_the_contrast():
+    x = np.arange(32, dtype=np.float64)
+    light = np.tile(1 + 0.5 * np.exp(-x / 3), (32, 1))  # falloff near a wall at x = 0
+    second = np.abs(light[0, 1:-1] - (light[0, :-2] + light[0, 2:]) / 2) / light[0, 1:-1]
+    refined = refine.texels_to_refine(*field(light), contrast=0.01)[0][16, 1:-1]
+    assert np.array_equal(refined, second > 0.01)
+
+
+def test_unusable_centres_refine_themselves_and_their_neighbours():
+    usable = np.ones((9, 9), bool)
+    usable[4, 4] = False  # inside solid geometry, or outside the UV triangles
+    refined = refine.texels_to_refine(*field(np.ones((9, 9)), usable))[0]
+    assert refined[3:6, 3:6].all()
+    assert not refined[interior(9)][np.abs(np.mgrid[0:9, 0:9] - 4).max(axis=0)[interior(9)] > 1].any()
+
+
+def test_dark_texels_compare_as_a_hundredth_of_the_brightest():
+    """Departures in the dark count against contrast x 1 % of the brightest texel, not against
+    their own tiny values."""
+    rng = np.random.default_rng(3)
+    light = np.full((12, 12), 1e-3) + rng.uniform(0, 1.5e-4, (12, 12))  # 150 % swings of the dark level
+    light[0, 0] = 1.0
+    refined = refine.texels_to_refine(*field(light))[0]
+    assert not refined[2:-1, 2:-1].any()
+    light[6, 6] += 4e-4  # above 0.02 x 0.01 of the brightest
+    assert refine.texels_to_refine(*field(light))[0][6, 6]
+
+
+def test_adaptive_bake_matches_every_sample_for_far_fewer_samples(monkeypatch):
+    """A wall on a plane under a sky and a sun: shadow edge, contact with the wall's footprint,
+    light curving near the wall. Every sample of every texel (a sun ray each) against the
+    adaptive bake: the same maps within 1 % of the open value, from well under half the samples."""
+    v, t, uv = grid_plane(size=4, n=16)
+    wall = cube([-0.2, -1.0, 0], [0.2, 1.0, 0.8])
+    scene, (plane, _) = scene_of((v, t), wall)
+    queried = []
+    original = scene.visibility
+    monkeypatch.setattr(scene, "visibility", lambda p, *a, **k: queried.append(len(p)) or original(p, *a, **k))
+    maps = {}
+    for adaptive in (False, True):
+        queried.clear()
+        maps[adaptive] = bake(scene, [Target(Surface(plane, v, t), uv)], resolution=64, lighting=uniform_sky(),
+                              suns=[Sun((0.6, 0.3, 0.75), 3.0, math.radians(2))], samples=9, bounces=0,
+                              adaptive=adaptive, adaptive_suns=False)[0]
+        maps[adaptive]["samples"] = sum(queried)
+    every, adaptive = maps[False], maps[True]
+    covered = every["coverage"] > 0
+    open_value = every["flat"][covered].max()
+    for name in ("flat", "b0", "b1", "b2", "ao"):
+        worst = np.abs(adaptive[name] - every[name])[covered].max() / (open_value if name != "ao" else 1.0)
+        print(f"{name}: worst difference {100 * worst:.2f} % of the open value")
+        assert worst < 0.01
+    print("samples:", every["samples"], "adaptive:", adaptive["samples"])
+    assert adaptive["samples"] < 0.45 * every["samples"]
+
+
+def test_contrast_must_be_positive():
+    v, t, uv = grid_plane()
+    scene, (plane,) = scene_of((v, t))
+    for bad in (0, -0.1, float("nan")):
+        with pytest.raises(ValueError, match="contrast"):
+            bake(scene, [Target(Surface(plane, v, t), uv)], resolution=8, lighting=uniform_sky(), contrast=bad)
