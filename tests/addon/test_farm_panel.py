@@ -95,7 +95,10 @@ def test_the_lightmap_and_panorama_jobs_follow_their_panels(saved):
     lm.layout = "OBJECT"
     bpy.ops.wm.save_mainfile()
     args = cli.build_parser().parse_args(["lightmaps", *farm_panel.farm_command(bpy.context)[8:]])
-    assert args.uv == "islands_here"
+    assert args.uv == "islands_here" and not args.uniform
+    lm.adaptive = False
+    bpy.ops.wm.save_mainfile()
+    assert cli.build_parser().parse_args(["lightmaps", *farm_panel.farm_command(bpy.context)[8:]]).uniform
 
     scene.hemishadow_farm.kind = "panorama"
     pano = scene.hemishadow_panorama

@@ -105,6 +105,19 @@ def test_command_line(scene, tmp_path, capsys):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["Floor.exr"]  # nothing else written
 
 
+def test_command_line_samples_adaptively_unless_uniform(scene, tmp_path, monkeypatch):
+    from addon import cli
+
+    plane()
+    seen = []
+    engine_bake = lm.bake
+    monkeypatch.setattr(lm, "bake", lambda *a, **k: seen.append(k["adaptive"]) or engine_bake(*a, **k))
+    for extra in ([], ["--uniform"]):
+        assert cli.main(["lightmaps", "--objects", "Floor", "--resolution", "8", "--bounces", "0", "--samples", "9",
+                         "--out", str(tmp_path), *extra]) == 0
+    assert seen == [True, False]
+
+
 def test_lightmap_node_group_combines_like_source(scene, tmp_path):
     """A plane emitting the group's output, rendered by Cycles from above: w_i =
     saturate(dot(n, b_i))^2, sum w_i map_i / sum w_i, for a tilted normal-map colour."""
