@@ -140,6 +140,29 @@ impl CellWords {
     }
 }
 
+const CHUNK: usize = 1024;
+
+fn fill_every_texel(cells: &CellWords, masks: &mut [Mask], first: usize, resolution: usize) {
+    masks.par_chunks_mut(CHUNK).enumerate().for_each(|(c, chunk)| cells.fill(chunk, first + c * CHUNK, resolution));
+}
+
+/// Half the work: each negative face's texel (face + 1, R - 1 - i, R - 1 - j) has exactly the
+/// opposite centre direction of (face, i, j) when R is a power of two (the coordinates
+/// -1 + (i + 0.5) 2 / R are exact), so every dot product is exactly negated and the mask is the
+/// complement within the disk (a cell exactly on the plane would be in both: none is, tested
+/// at every power-of-two resolution up to 256).
+fn build_by_mirrors(cells: &CellWords, masks: &mut [Mask], resolution: usize) {
+    let face = resolution * resolution;
+    for (pair, faces) in masks.chunks_mut(2 * face).enumerate() {
+        let (positive, negative) = faces.split_at_mut(face);
+        fill_every_texel(cells, positive, 2 * pair * face, resolution);
+        negative.par_iter_mut().enumerate().for_each(|(t, mask)| {
+            let mirror = &positive[face - 1 - t];
+            *mask = Mask(std::array::from_fn(|w| cells.inside[w] & !mirror.0[w]));
+        });
+    }
+}
+
 impl PlaneTable {
     pub fn build(resolution: usize) -> Result<Self> {
         if !(4..=512).contains(&resolution) {
@@ -149,8 +172,11 @@ impl PlaneTable {
         }
         let cells = CellWords::new();
         let mut masks = LargePageVec::filled(Mask::EMPTY, 6 * resolution * resolution);
-        const CHUNK: usize = 1024;
-        masks.par_chunks_mut(CHUNK).enumerate().for_each(|(c, chunk)| cells.fill(chunk, c * CHUNK, resolution));
+        if resolution.is_power_of_two() {
+            build_by_mirrors(&cells, &mut masks, resolution);
+        } else {
+            fill_every_texel(&cells, &mut masks, 0, resolution);
+        }
         Ok(PlaneTable { resolution, masks })
     }
 
@@ -243,6 +269,18 @@ impl PlaneTable {
 mod tests {
     use super::*;
     use crate::disk_mask::disk;
+
+    #[test]
+    fn mirrored_faces_give_the_masks_of_their_own_directions() {
+        let cells = CellWords::new();
+        for resolution in [4, 8, 64, 128, 256] {
+            let mut direct = vec![Mask::EMPTY; 6 * resolution * resolution];
+            fill_every_texel(&cells, &mut direct, 0, resolution);
+            let table = PlaneTable::build(resolution).unwrap();
+            let differ = (0..direct.len()).filter(|&t| *table.mask_at(t as u32) != direct[t]).count();
+            assert_eq!(differ, 0, "resolution {resolution}");
+        }
+    }
 
     #[test]
     fn word_parallel_half_spaces_equal_the_cell_by_cell_test() {
