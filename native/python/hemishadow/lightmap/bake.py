@@ -371,15 +371,17 @@ def _light(scene, samples, offsets, *, lighting, suns, lamps, lamp_points, want_
 
 def _refined(scene, centres, full, offsets, contrast, steps, light_args):
     """Adaptive supersampling (`refine.py`): every texel lit at its centre, then all the
-    samples of the texels where that is not enough; one set of samples, each texel's either."""
+    samples of the texels where that is not enough, exactly as without refinement; one set
+    of samples, each texel's either."""
     lit = _light(scene, centres, texels.offsets(1), **light_args)
     cells_count = int(np.prod(centres.shape))
     values = np.zeros((cells_count, lit.maps[0].size + 1), np.float32)
     values[centres.cell] = np.concatenate([lit.maps.reshape(len(lit.ao), -1), lit.ao[:, None]], axis=1)
     usable = np.zeros(cells_count, bool)
     usable[centres.cell] = centres.covered & lit.valid
+    brightest = np.r_[np.full(values.shape[1] - 1, np.nan), 1.0]  # the light's brightest texel; AO's open sky
     refine = refinement.texels_to_refine(values.reshape(centres.shape + (-1,)), usable.reshape(centres.shape),
-                                         contrast).reshape(-1)
+                                         contrast, brightest).reshape(-1)
     more = refine[full.cell]
     steps.step(2 * int((~more).sum()))  # the samples of texels that keep their centre's light
     if not more.any():

@@ -15,9 +15,10 @@ difference, so a texel is refined when
 - its light (every lobe's RGB and AO) departs from the mean of two opposite neighbours by
   more than `contrast` of its own value.
 
-Values below 1 % of the brightest texel of the map count as 1 % of it, so departures in the
-dark are measured against `contrast` x 1 % of the brightest, not against their own tiny
-values. A linear gradient of any slope refines nothing.
+Values below 1 % of the brightest texel of the map (AO: of the open sky, 1) count as 1 % of
+it, so departures in the dark are measured against `contrast` x 1 % of the brightest, not
+against their own tiny values. A linear gradient of any slope refines nothing. A refined
+texel gets exactly the samples it would get without refinement.
 """
 
 import numpy as np
@@ -32,13 +33,16 @@ DARK = 0.01
 _AXES = ((0, 1), (1, 0), (1, 1), (1, -1))
 
 
-def texels_to_refine(values, usable, contrast=CONTRAST):
+def texels_to_refine(values, usable, contrast=CONTRAST, full=None):
     """Texels (T, R, R) bool that need all their samples, from the light at their centre
     samples: `values` (T, R, R, C) (any value where there is no usable centre), `usable`
-    (T, R, R): a centre sample inside a UV triangle and not inside solid geometry. Texels
-    outside every island come out refined too; the caller has no samples for them."""
+    (T, R, R): a centre sample inside a UV triangle and not inside solid geometry. `full`
+    (C,): per channel the value that counts as full, of which `DARK` is the least a departure
+    is measured against (None: the brightest texel's). Texels outside every island come out
+    refined too; the caller has no samples for them."""
     values = np.where(usable[..., None], values, 0.0)
-    floor = DARK * np.abs(values).reshape(-1, values.shape[-1]).max(axis=0)
+    brightest = np.abs(values).reshape(-1, values.shape[-1]).max(axis=0)
+    floor = DARK * (brightest if full is None else np.where(np.isnan(full), brightest, full))
     scale = np.maximum(np.abs(values), np.maximum(floor, 1e-30))
     padded_values = np.pad(values, ((0, 0), (1, 1), (1, 1), (0, 0)))
     padded_usable = np.pad(usable, ((0, 0), (1, 1), (1, 1)))
