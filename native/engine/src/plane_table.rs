@@ -91,7 +91,7 @@ impl CellWords {
 
     /// The cells on the positive side of the plane with normal m: the same sums, in the same
     /// order, as a cell-by-cell test, written lane-parallel so that the table (393,216 masks
-    /// at resolution 256, half a second of every scene's first query) builds in vector code.
+    /// at resolution 256, built at every process's first scene query) builds in vector code.
     #[inline(always)]
     fn half_space(&self, m: [f32; 3]) -> Mask {
         let mut mask = Mask::EMPTY;
