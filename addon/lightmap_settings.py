@@ -36,7 +36,8 @@ class HemishadowLightmapSettings(bpy.types.PropertyGroup):
     bounces: IntProperty(name="Bounces", default=2, min=0, max=16, description="Diffuse bounces (0: direct only)")
     samples: IntProperty(name="Samples", default=4, min=1, max=64, description="Supersamples per texel, in total")
     adaptive: BoolProperty(name="Adaptive Samples", default=True,
-                           description="All samples only where a texel's light departs from its neighbours' (shadow and contact edges, island rims); elsewhere one sample at its centre")
+                           description="All samples only where a texel's light departs from its neighbours' "
+                                       "(shadow and contact edges, island rims); elsewhere one sample at its centre")
     margin: IntProperty(name="Margin", default=2, min=0, max=64, description="Padding around islands, in texels")
     directory: StringProperty(name="Folder", default="", subtype="DIR_PATH",
                               description="Where <object>.exr goes (empty: //lightmaps beside the .blend; "

@@ -56,7 +56,9 @@ class HEMISHADOW_OT_bake_lightmaps(ModalJob, bpy.types.Operator):
     bounces: bpy.props.IntProperty(name="Bounces", default=2, min=0, max=16)
     samples: bpy.props.IntProperty(name="Samples", default=4, min=1, max=64, description="Supersamples per texel")
     adaptive: bpy.props.BoolProperty(name="Adaptive Samples", default=True,
-                                     description="All samples only where a texel's light departs from its neighbours' (shadow and contact edges, island rims); elsewhere one sample at its centre")
+                                     description="All samples only where a texel's light departs from its "
+                                                 "neighbours' (shadow and contact edges, island rims); elsewhere "
+                                                 "one sample at its centre")
     margin: bpy.props.IntProperty(name="Margin", default=2, min=0, max=64, description="Padding in texels")
     layout: bpy.props.EnumProperty(name="Layout", default="ATLAS", items=[
         ("ATLAS", "Atlas", "Several objects share one image through the UV map hemishadow_lightmap"),

@@ -277,7 +277,8 @@ def bake(scene, targets, *, resolution, lighting=None, suns=(), lamps=(), surfac
     receivers = bounce_receivers(targets, surfaces) if (bounces or emitters(targets, surfaces)) else []
     vertex_count = sum(len(r[1]) for r in receivers)
     first = 0 if centres is None else len(centres.points)
-    steps = Steps(progress, 2 * (first + len(full.points)) + vertex_count * (1 + bounces) + len(full.points) * bool(receivers))
+    steps = Steps(progress, 2 * (first + len(full.points)) + vertex_count * (1 + bounces)
+                  + len(full.points) * bool(receivers))
     light_args = dict(lighting=lighting, suns=direct_suns, lamps=direct_lamps, lamp_points=lamp_points, want_sh=want_sh,
                       offset=offset, steps=steps)
     if centres is None:
