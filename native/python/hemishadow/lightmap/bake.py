@@ -208,7 +208,7 @@ def _texel_maps(texel, resolution, values, valid):
 
 
 def bake(scene, targets, *, resolution, lighting=None, suns=(), lamps=(), surfaces=(), bounces=2, samples=4, margin=2,
-         basis="hl2", offset=None, stitch_seams=True, adaptive=True, contrast=refinement.CONTRAST, adaptive_suns=True,
+         basis="hl2", offset=None, stitch_seams=True, adaptive=True, contrast=refinement.CONTRAST, adaptive_suns=False,
          lamp_points=16, atlas=False, progress=None):
     """Bakes lightmaps of `targets` (`Target`s) in `scene` (a `hemishadow.Scene` holding every
     blocker); returns one dict of maps per target (see the module docstring), or with
@@ -237,8 +237,8 @@ def bake(scene, targets, *, resolution, lighting=None, suns=(), lamps=(), surfac
     margin: texels of padding around islands. basis: "hl2" (flat, b0-b2, ao), "sh" (flat,
         sh0-sh3, ao) or "flat" (flat, ao). offset: the receivers' lift (`Scene`'s default).
     adaptive_suns: with adaptive=False, a sun ray per texel first, then per sample where
-        neighbours disagree (`_sun_lit`); False: a ray per sample. stitch_seams: match
-        texels across UV seams.
+        neighbours disagree (`_sun_lit`: an edge between two texels' first rays is missed);
+        False (the default): a ray per sample. stitch_seams: match texels across UV seams.
     progress: None or a callable taking the fraction done; returning False raises
         `hemishadow.Cancelled` and nothing is returned.
     """
