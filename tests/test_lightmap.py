@@ -359,6 +359,18 @@ def test_engine_lobe_integrals_match_the_numpy_quadrature():
     assert np.abs(ours - ref).max() < 1e-4 * np.abs(ref).max()
 
 
+def test_engine_cell_moments_match_the_numpy_quadrature():
+    """The cells' moments the bake uses (the engine's) against the same quadrature in numpy,
+    and the hemisphere's totals: pi for the cosine (z), 2 pi for the solid angle."""
+    from hemishadow.lightmap import cells
+    ours, numpy_moments = cells.moments(), cells.integrate_moments()
+    assert ours.shape == (1024, 4) and ours.dtype == np.float64
+    assert np.abs(ours - numpy_moments).max() < 1e-12
+    assert ours[:, 2].sum() == pytest.approx(math.pi, rel=1e-5)
+    assert ours[:, 3].sum() == pytest.approx(2 * math.pi, rel=1e-5)
+    assert np.abs(ours[:, :2].sum(axis=0)).max() < 1e-9  # symmetric about the normal
+
+
 def test_one_rasterization_gives_mask_and_validity():
     """Scene.visibility_valid (one depth-buffer pass) against visibility and valid: receivers
     in a closed room with a box on the floor (some inside it), where every mask needs both."""

@@ -116,6 +116,13 @@ fn matrix(rows: Vec<f32>, n: usize, k: usize, py: Python<'_>) -> Bound<'_, PyArr
 }
 
 /// Real SH basis Y_i(d) of unit directions (N, 3): float32 (N, bands^2).
+/// (1024, 4) float64: each mask cell's first moment and solid angle (`engine::scene::lobes::cell_moments`).
+#[pyfunction]
+fn cell_moments(py: Python<'_>) -> PyResult<Bound<'_, PyArray2<f64>>> {
+    let rows = run(py, || Ok(engine::scene::lobes::cell_moments()))?;
+    Ok(Array2::from_shape_vec((rows.len(), 4), rows.into_iter().flatten().collect()).expect("1024 x 4").into_pyarray(py))
+}
+
 #[pyfunction]
 fn sh_basis<'py>(py: Python<'py>, directions: PyReadonlyArray2<f32>, bands: usize) -> PyResult<Bound<'py, PyArray2<f32>>> {
     let dirs = rows3(&directions, "directions")?;
@@ -415,6 +422,7 @@ fn product_f64<'py>(py: Python<'py>, a: PyReadonlyArray2<'py, f64>, b: PyReadonl
 #[pymodule]
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(sh_basis, m)?)?;
+    m.add_function(wrap_pyfunction!(cell_moments, m)?)?;
     m.add_function(wrap_pyfunction!(transfer, m)?)?;
     m.add_function(wrap_pyfunction!(project_equirectangular, m)?)?;
     m.add_function(wrap_pyfunction!(rasterize_local, m)?)?;

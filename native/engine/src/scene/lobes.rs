@@ -151,6 +151,44 @@ impl Kernel {
     }
 }
 
+/// Each cell's first moment M_c (the integral of s over its solid angle, in the receiver's
+/// frame) and its solid angle: (x, y, z, solid angle) per cell, row-major. A midpoint rule in
+/// (theta, phi) on 1024 x 2048 points, which has no 1/z singularity at the rim; each point
+/// goes to the cell its direction projects into (the z components add up to pi to 1e-6).
+pub fn cell_moments() -> Vec<[f64; 4]> {
+    const THETA: usize = 1024;
+    const PHI: usize = 2048;
+    let side = crate::disk_mask::MASK_SIDE;
+    let (dt, dp) = (std::f64::consts::FRAC_PI_2 / THETA as f64, 2.0 * std::f64::consts::PI / PHI as f64);
+    let cell = |v: f64| (((v + 1.0) * (side as f64 / 2.0)) as usize).min(side - 1);
+    (0..THETA)
+        .into_par_iter()
+        .fold(
+            || vec![[0.0f64; 4]; MASK_CELLS],
+            |mut sums, i| {
+                let theta = (i as f64 + 0.5) * dt;
+                let (st, ct) = theta.sin_cos();
+                let weight = st * dt * dp;
+                for j in 0..PHI {
+                    let (sp, cp) = ((j as f64 + 0.5) * dp).sin_cos();
+                    let s = [st * cp, st * sp, ct];
+                    let sum = &mut sums[cell(s[1]) * side + cell(s[0])];
+                    for (total, v) in sum.iter_mut().zip([s[0], s[1], s[2], 1.0]) {
+                        *total += v * weight;
+                    }
+                }
+                sums
+            },
+        )
+        .reduce(
+            || vec![[0.0f64; 4]; MASK_CELLS],
+            |mut a, b| {
+                a.iter_mut().zip(&b).for_each(|(x, y)| (0..4).for_each(|k| x[k] += y[k]));
+                a
+            },
+        )
+}
+
 /// Per lobe, the `WIDTH` sums over the cells of weight x block, for two columns of blocks
 /// (one block per cell in each).
 trait BlockSums {
