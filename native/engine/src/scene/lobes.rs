@@ -7,8 +7,8 @@
 //!
 //! Laid out for the hot loop: per receiver, the lobes' weights of every cell (the open ones
 //! only) go to a scratch of `MAX_LOBES` x 1024, then one pass over the cells adds each cell's
-//! values, eight at a time, to every lobe's sums, which stay in vector registers. The kernel
-//! is compiled for AVX2 + FMA as well and picked at run time.
+//! values, two blocks of eight at a time, to every lobe's sums, which stay in vector
+//! registers. The kernel is compiled for AVX2 + FMA as well and picked at run time.
 
 use rayon::prelude::*;
 
@@ -67,7 +67,8 @@ impl Kernel {
         for j in 0..block_count {
             for c in 0..MASK_CELLS {
                 for (i, slot) in blocks[j * MASK_CELLS + c].iter_mut().enumerate() {
-                    *slot = values.get(c * k + j * WIDTH + i).copied().filter(|_| j * WIDTH + i < k).unwrap_or(0.0);
+                    let value = j * WIDTH + i;
+                    *slot = if value < k { values[c * k + value] } else { 0.0 };
                 }
             }
         }
@@ -230,8 +231,8 @@ impl BlockSums for Avx2 {
         unsafe {
             let mut first = [_mm256_setzero_ps(); L];
             let mut second = [_mm256_setzero_ps(); L];
-            for c in 0..MASK_CELLS {
-                let (a, b) = (_mm256_loadu_ps(blocks.0[c].as_ptr()), _mm256_loadu_ps(blocks.1[c].as_ptr()));
+            for (c, (a, b)) in blocks.0.iter().zip(blocks.1).enumerate() {
+                let (a, b) = (_mm256_loadu_ps(a.as_ptr()), _mm256_loadu_ps(b.as_ptr()));
                 for l in 0..L {
                     let w = _mm256_set1_ps(weights[l][c]);
                     first[l] = _mm256_fmadd_ps(w, a, first[l]);
