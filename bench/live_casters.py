@@ -21,6 +21,7 @@ Markdown table.
 import argparse
 import json
 import pathlib
+import shutil
 import statistics
 import subprocess
 import sys
@@ -42,6 +43,7 @@ def run_mode(mode, frames):
     scene, cloth, suzanne, floor = demo.build_scene(38, frames, "forest")
     out = ROOT / "out" / "bench_live_casters"
     out.mkdir(parents=True, exist_ok=True)
+    shutil.rmtree(out / "hemishadow_cache", ignore_errors=True)  # an earlier run's bake would be played instead
     import bpy
 
     bpy.ops.wm.save_as_mainfile(filepath=str(out / "scene.blend"))  # a home for the cache (//)
