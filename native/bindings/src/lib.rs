@@ -115,7 +115,6 @@ fn matrix(rows: Vec<f32>, n: usize, k: usize, py: Python<'_>) -> Bound<'_, PyArr
     Array2::from_shape_vec((n, k), rows).expect("engine output has the promised shape").into_pyarray(py)
 }
 
-/// Real SH basis Y_i(d) of unit directions (N, 3): float32 (N, bands^2).
 /// (1024, 4) float64: each mask cell's first moment and solid angle (`engine::scene::lobes::cell_moments`).
 #[pyfunction]
 fn cell_moments(py: Python<'_>) -> PyResult<Bound<'_, PyArray2<f64>>> {
@@ -123,6 +122,7 @@ fn cell_moments(py: Python<'_>) -> PyResult<Bound<'_, PyArray2<f64>>> {
     Ok(Array2::from_shape_vec((rows.len(), 4), rows.into_iter().flatten().collect()).expect("1024 x 4").into_pyarray(py))
 }
 
+/// Real SH basis Y_i(d) of unit directions (N, 3): float32 (N, bands^2).
 #[pyfunction]
 fn sh_basis<'py>(py: Python<'py>, directions: PyReadonlyArray2<f32>, bands: usize) -> PyResult<Bound<'py, PyArray2<f32>>> {
     let dirs = rows3(&directions, "directions")?;
