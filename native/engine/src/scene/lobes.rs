@@ -159,35 +159,36 @@ impl Kernel {
 pub fn cell_moments() -> Vec<[f64; 4]> {
     const THETA: usize = 1024;
     const PHI: usize = 2048;
+    const ROWS: usize = 64;
     let side = crate::disk_mask::MASK_SIDE;
     let (dt, dp) = (std::f64::consts::FRAC_PI_2 / THETA as f64, 2.0 * std::f64::consts::PI / PHI as f64);
     let cell = |v: f64| (((v + 1.0) * (side as f64 / 2.0)) as usize).min(side - 1);
-    (0..THETA)
+    let phis: Vec<(f64, f64)> = (0..PHI).map(|j| ((j as f64 + 0.5) * dp).sin_cos()).collect();
+    // Fixed bands of rows, summed in a fixed order: the same bits in every run.
+    let bands: Vec<Vec<[f64; 4]>> = (0..THETA / ROWS)
         .into_par_iter()
-        .fold(
-            || vec![[0.0f64; 4]; MASK_CELLS],
-            |mut sums, i| {
+        .map(|band| {
+            let mut sums = vec![[0.0f64; 4]; MASK_CELLS];
+            for i in band * ROWS..(band + 1) * ROWS {
                 let theta = (i as f64 + 0.5) * dt;
                 let (st, ct) = theta.sin_cos();
                 let weight = st * dt * dp;
-                for j in 0..PHI {
-                    let (sp, cp) = ((j as f64 + 0.5) * dp).sin_cos();
+                for &(sp, cp) in &phis {
                     let s = [st * cp, st * sp, ct];
                     let sum = &mut sums[cell(s[1]) * side + cell(s[0])];
                     for (total, v) in sum.iter_mut().zip([s[0], s[1], s[2], 1.0]) {
                         *total += v * weight;
                     }
                 }
-                sums
-            },
-        )
-        .reduce(
-            || vec![[0.0f64; 4]; MASK_CELLS],
-            |mut a, b| {
-                a.iter_mut().zip(&b).for_each(|(x, y)| (0..4).for_each(|k| x[k] += y[k]));
-                a
-            },
-        )
+            }
+            sums
+        })
+        .collect();
+    bands.into_iter().reduce(|mut a, b| {
+        a.iter_mut().zip(&b).for_each(|(x, y)| (0..4).for_each(|k| x[k] += y[k]));
+        a
+    })
+    .expect("at least one band")
 }
 
 /// Per lobe, the `WIDTH` sums over the cells of weight x block, for two columns of blocks
