@@ -380,9 +380,9 @@ def _refined(scene, centres, full, offsets, contrast, steps, light_args):
     values[centres.cell] = np.concatenate([lit.maps.reshape(len(lit.ao), -1), lit.ao[:, None]], axis=1)
     usable = np.zeros(cells_count, bool)
     usable[centres.cell] = centres.covered & lit.valid
-    brightest = np.r_[np.full(values.shape[1] - 1, np.nan), 1.0]  # the light's brightest texel; AO's open sky
+    full_value = np.r_[np.full(values.shape[1] - 1, np.nan), 1.0]  # the light: its brightest texel (NaN); AO: 1
     refine = refinement.texels_to_refine(values.reshape(centres.shape + (-1,)), usable.reshape(centres.shape),
-                                         contrast, brightest).reshape(-1)
+                                         contrast, full_value).reshape(-1)
     more = refine[full.cell]
     steps.step(2 * int((~more).sum()))  # the samples of texels that keep their centre's light
     if not more.any():
