@@ -71,6 +71,43 @@ def test_rotation_keeps_band_energies_and_matches_rotated_evaluation():
     assert np.abs(g - f).max() < 1e-4
 
 
+@pytest.mark.parametrize("bands", [1, 2, 3, 5])
+def test_lighting_in_receiver_frames_takes_the_worlds_values(bands):
+    """The lightmap's lighting per receiver frame (the engine's rotation, `_native.sh_to_frames`):
+    at any direction, the frame's coefficients in local coordinates give the world's value
+    there, for right- and left-handed frames; checked by evaluating both bases directly."""
+    from hemishadow.lightmap.light import local_lighting
+    from hemishadow.sh import fibonacci_directions
+
+    rng = np.random.default_rng(bands)
+    n = rng.normal(size=(200, 3))
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    t = np.cross(n, rng.normal(size=3))
+    t /= np.linalg.norm(t, axis=1, keepdims=True)
+    b = np.cross(n, t)
+    b[::2] *= -1  # mirrored frames
+    lighting = rng.normal(size=(bands * bands, 3)).astype(np.float32)
+    local = local_lighting(lighting, t, b, n)
+    dirs = fibonacci_directions(64)
+    world_values = hemishadow.sh_basis(dirs, bands) @ lighting                            # (D, 3)
+    for p in range(len(n)):
+        in_frame = dirs @ np.stack([t[p], b[p], n[p]]).T                                   # (D, 3) local
+        local_values = hemishadow.sh_basis(in_frame, bands) @ local[p]
+        assert np.abs(local_values - world_values).max() < 1e-4 * (1 + np.abs(world_values).max())
+
+
+def test_lighting_in_receiver_frames_refuses_bad_input():
+    from hemishadow import _native
+
+    with pytest.raises(ValueError, match="square number"):
+        _native.sh_to_frames(np.zeros((8, 3), np.float32), np.eye(3, dtype=np.float32)[None])
+    with pytest.raises(ValueError, match="finite"):
+        _native.sh_to_frames(np.zeros((9, 3), np.float32), np.full((1, 3, 3), np.nan, np.float32))
+    with pytest.raises(ValueError, match=r"\(P, 3, 3\)"):
+        _native.sh_to_frames(np.zeros((9, 3), np.float32), np.zeros((2, 3, 2), np.float32))
+    assert _native.sh_to_frames(np.zeros((9, 3), np.float32), np.zeros((0, 3, 3), np.float32)).shape == (0, 9, 3)
+
+
 def test_rotation_about_z_by_quarter_turn_maps_x_to_y():
     # A lobe along +X rotated a quarter turn about +Z points along +Y.
     lobe = hemishadow.sh_basis([[1.0, 0, 0]], 3)[0]

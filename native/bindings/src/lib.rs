@@ -6,8 +6,8 @@
 use std::panic::{catch_unwind, AssertUnwindSafe};
 
 use hemishadow_engine as engine;
-use numpy::ndarray::Array2;
-use numpy::{IntoPyArray, PyArray2, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3};
+use numpy::ndarray::{Array2, Array3};
+use numpy::{IntoPyArray, PyArray2, PyArray3, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3};
 use pyo3::create_exception;
 use pyo3::exceptions::{PyException, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
@@ -137,6 +137,28 @@ fn sh_basis<'py>(py: Python<'py>, directions: PyReadonlyArray2<f32>, bands: usiz
         Ok(out)
     })?;
     Ok(matrix(values, n, bands * bands, py))
+}
+
+/// SH coefficients (K, C) of C functions given in world space, expressed in each of the frames
+/// (P, 3, 3) (rows: the frame's x, y, z axes in world space): float32 (P, K, C).
+#[pyfunction]
+fn sh_to_frames<'py>(py: Python<'py>, coefficients: PyReadonlyArray2<f32>, frames: PyReadonlyArray3<f32>) -> PyResult<Bound<'py, PyArray3<f32>>> {
+    let (k, channels) = coefficients.as_array().dim();
+    let bands = (k as f64).sqrt().round() as usize;
+    if bands * bands != k {
+        return Err(PyValueError::new_err(format!("coefficients must have a square number of rows (9, 16, 25), got {k}")));
+    }
+    let world: Vec<f32> = coefficients.as_array().iter().copied().collect();
+    let frames = frames.as_array();
+    if frames.shape()[1..] != [3, 3] {
+        return Err(PyValueError::new_err(format!("frames must have shape (P, 3, 3), got {:?}", frames.shape())));
+    }
+    let axes: Vec<[[f32; 3]; 3]> = frames.outer_iter().map(|f| std::array::from_fn(|r| std::array::from_fn(|c| f[[r, c]]))).collect();
+    if axes.iter().flatten().flatten().any(|v| !v.is_finite()) {
+        return Err(PyValueError::new_err("frames must be finite"));
+    }
+    let out = run(py, || Ok(engine::sh_rotation::ShRotator::new(engine::sh::ShBasis::new(bands)?).to_frames(&world, channels, &axes)))?;
+    Ok(Array3::from_shape_vec((axes.len(), k, channels), out).expect("P x K x C").into_pyarray(py))
 }
 
 /// Per-vertex transfer vectors; returns (transfer (N, bands^2), vertices without a normal).
@@ -422,6 +444,7 @@ fn product_f64<'py>(py: Python<'py>, a: PyReadonlyArray2<'py, f64>, b: PyReadonl
 #[pymodule]
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(sh_basis, m)?)?;
+    m.add_function(wrap_pyfunction!(sh_to_frames, m)?)?;
     m.add_function(wrap_pyfunction!(cell_moments, m)?)?;
     m.add_function(wrap_pyfunction!(transfer, m)?)?;
     m.add_function(wrap_pyfunction!(project_equirectangular, m)?)?;

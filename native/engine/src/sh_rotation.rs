@@ -6,6 +6,8 @@
 //! evaluations and two small matrix products per band, with no recursion on rotation
 //! matrices (compare Ivanic and Ruedenberg 1996, which is faster but far longer).
 
+use rayon::prelude::*;
+
 use crate::sh::{Lanes16, Real, ShBasis, MAX_COEFFS};
 
 pub struct ShRotator {
@@ -142,6 +144,27 @@ impl ShRotator {
         self.to_world_lanes(axes, local, out)
     }
 
+    /// The coefficients, in each of `frames` (rows: its x, y, z axes in world space, a
+    /// rotation or a mirror), of `channels` functions given in world space (`world`: K rows of
+    /// `channels`): K x `channels` per frame, frame after frame. Each is `to_world` with the
+    /// world's axes seen from the frame (the transposed rows), one call per channel.
+    pub fn to_frames(&self, world: &[f32], channels: usize, frames: &[[[f32; 3]; 3]]) -> Vec<f32> {
+        let k = self.basis.coeffs();
+        let per_channel: Vec<Vec<f32>> = (0..channels).map(|c| (0..k).map(|i| world[i * channels + c]).collect()).collect();
+        let mut out = vec![0.0f32; frames.len() * k * channels];
+        out.par_chunks_mut(k * channels).zip(frames).for_each(|(out, f)| {
+            let world_axes = [0, 1, 2].map(|j| [f[0][j], f[1][j], f[2][j]]);
+            let mut rotated = [0.0f32; MAX_COEFFS];
+            for (c, function) in per_channel.iter().enumerate() {
+                self.to_world(world_axes, function, &mut rotated[..k]);
+                for (i, v) in rotated[..k].iter().enumerate() {
+                    out[i * channels + c] = *v;
+                }
+            }
+        });
+        out
+    }
+
     fn to_world_each(&self, axes: [[f32; 3]; 3], local: &[f32], out: &mut [f32]) {
         let bands = self.basis.bands();
         let mut y = [0.0f32; MAX_COEFFS];
@@ -190,6 +213,38 @@ mod tests {
                 rotator.to_world(axes, &local, &mut fast[..k]);
                 rotator.to_world_each(axes, &local, &mut each[..k]);
                 assert!(fast[..k].iter().zip(&each[..k]).all(|(a, b)| a.to_bits() == b.to_bits()), "bands {bands}, case {case}: {fast:?} vs {each:?}");
+            }
+        }
+    }
+
+    /// In every frame (mirrored ones too), the frame's coefficients at a local direction give
+    /// the world function's value at that direction in world space, channel by channel.
+    #[test]
+    fn functions_seen_from_frames_take_the_same_values() {
+        for bands in [1, 3, 5] {
+            let basis = ShBasis::new(bands).unwrap();
+            let k = bands * bands;
+            let world: Vec<f32> = (0..k * 3).map(|i| ((i * 7 % 11) as f32 - 5.0) / 5.0).collect();
+            let frames: Vec<[[f32; 3]; 3]> = (0..50)
+                .map(|case| {
+                    let t = case as f32 * 0.917;
+                    let n = crate::mesh::normalize([t.cos(), (2.3 * t).sin(), (0.7 * t).cos() - 0.2]).unwrap();
+                    let (tx, bx) = crate::mesh::tangent_frame(n);
+                    if case % 2 == 0 { [tx, bx, n] } else { [bx, tx, n] }
+                })
+                .collect();
+            let local = ShRotator::new(basis.clone()).to_frames(&world, 3, &frames);
+            let (mut yw, mut yl) = ([0.0f32; 25], [0.0f32; 25]);
+            for (f, frame) in frames.iter().enumerate() {
+                for d in generic_directions(30) {
+                    basis.eval(d, &mut yw);
+                    basis.eval([dot(frame[0], d), dot(frame[1], d), dot(frame[2], d)], &mut yl);
+                    for c in 0..3 {
+                        let fw: f32 = (0..k).map(|i| world[i * 3 + c] * yw[i]).sum();
+                        let fl: f32 = (0..k).map(|i| local[(f * k + i) * 3 + c] * yl[i]).sum();
+                        assert!((fw - fl).abs() < 1e-4 * (1.0 + fw.abs()), "bands {bands}, frame {f}, channel {c}: {fw} vs {fl}");
+                    }
+                }
             }
         }
     }

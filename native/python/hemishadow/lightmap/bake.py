@@ -59,8 +59,10 @@ _BITS_OF_BYTE = np.array([bin(b).count("1") for b in range(256)], np.uint8)
 
 
 def blocked_cells(masks):
-    """Set bits per packed mask (P, 16) uint64, a byte at a time. Not np.bitwise_count:
-    Blender 4.2-4.4 bundle numpy 1.26, which does not have it."""
+    """Set bits per packed mask (P, 16) uint64: np.bitwise_count (numpy 2, 10x faster), else a
+    byte at a time (Blender 4.2 to 5.0 bundle numpy 1.26, which does not have it)."""
+    if hasattr(np, "bitwise_count"):
+        return np.bitwise_count(masks).sum(axis=1, dtype=np.int64)
     return _BITS_OF_BYTE[np.ascontiguousarray(masks).view(np.uint8)].sum(axis=1, dtype=np.int64)
 
 
@@ -190,10 +192,11 @@ def _sample_geometry(target, resolution, samples, check=None):
     if tx.overlapping:
         warnings.warn(f"{target.label}: its lightmap UV islands overlap ({tx.overlapping} samples in more than "
                       "one triangle); each texel keeps the first triangle", RuntimeWarning, stacklevel=3)
-    w = tx.bary[:, :, None]
-    points = (pos[tx.triangle] * w).sum(1)
+    w = tx.bary
+    points = np.einsum("pkj,pk->pj", pos[tx.triangle], w)
     check()
-    t, b, n = frames.tangent_frames((normals[tx.triangle] * w).sum(1), (tangents[tx.triangle] * w).sum(1))
+    t, b, n = frames.tangent_frames(np.einsum("pkj,pk->pj", normals[tx.triangle], w),
+                                    np.einsum("pkj,pk->pj", tangents[tx.triangle], w))
     return tx, points, ng[tx.triangle], (t, b, n), tris, uv
 
 

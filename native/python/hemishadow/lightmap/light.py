@@ -19,7 +19,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import _native, sh_basis
-from ..sh import fibonacci_directions
 from . import basis, cells
 
 
@@ -36,33 +35,11 @@ class Sun:
 
 
 def local_lighting(lighting, t, b, n):
-    """Lighting SH (K, 3) expressed in each receiver's frame (rows t, b, n): (P, K, 3).
-
-    A rotation keeps each band apart, so band l is fitted from the radiance of that band alone
-    at 2 bands + 3 fixed local directions (at least its 2l + 1 coefficients; condition number
-    below 6 up to 5 bands): one SH evaluation at 2 bands + 3 directions per receiver, not 3K
-    (5x faster for 3 bands, 8x for 5)."""
-    k = len(lighting)
-    bands = int(round(np.sqrt(k)))
-    fits, dirs = _band_fits(bands)
-    frame = np.stack([t, b, n], axis=1).astype(np.float32)          # (P, 3, 3), rows t, b, n
-    world = np.matmul(dirs[None], frame)                            # (P, m, 3) unit directions
-    y = _native.sh_basis(np.ascontiguousarray(world.reshape(-1, 3)), bands).reshape(len(t), len(dirs), k)
-    light = np.asarray(lighting, np.float32)
-    out = np.empty((len(t), k, 3), np.float32)
-    for l, fit in enumerate(fits):
-        s = slice(l * l, (l + 1) * (l + 1))
-        out[:, s] = np.matmul(fit[None], y[:, :, s] @ light[s])
-    return out
-
-
-@functools.cache
-def _band_fits(bands):
-    """Per band, the least-squares fit (2l+1, m) from values at m local directions (m, 3)."""
-    dirs = fibonacci_directions(2 * bands + 3)
-    y = sh_basis(dirs, bands).astype(np.float64)
-    fits = [np.linalg.pinv(y[:, l * l:(l + 1) * (l + 1)]).astype(np.float32) for l in range(bands)]
-    return fits, dirs.astype(np.float32)
+    """Lighting SH (K, 3) expressed in each receiver's frame (rows t, b, n): (P, K, 3). The
+    engine's SH rotation (`sh_rotation.rs`, as it turns transfer into world space): a band
+    is fitted from its values at 2 l + 1 directions, all directions evaluated at once."""
+    frames = np.ascontiguousarray(np.stack([t, b, n], axis=1), np.float32)     # (P, 3, 3), rows t, b, n
+    return _native.sh_to_frames(np.ascontiguousarray(lighting, np.float32), frames)
 
 
 @functools.cache
@@ -79,7 +56,7 @@ def environment(masks, t, b, n, lobes, lighting, want_sh=False):
     normals; the open fraction of the first lobe (P,); and with want_sh the L1 SH (P, 4, 3) of
     the incident radiance / pi (world), else None. The lobe integrals over the open cells run
     in the engine (`Scene.lobe_integrals`, `cells.lobe_weights` in numpy is the same)."""
-    local = np.stack([(lobes * t[:, None]).sum(-1), (lobes * b[:, None]).sum(-1), (lobes * n[:, None]).sum(-1)], -1)
+    local = np.einsum("plj,pfj->plf", lobes, np.stack([t, b, n], axis=1))    # the lobes in the frame
     bands = 0 if lighting is None else int(round(np.sqrt(len(lighting))))
     y_cells, values = _cell_values(bands)
     moments = np.ascontiguousarray(cells.moments()[:, :3], np.float32)

@@ -50,11 +50,28 @@ def texel_space(uv, resolution):
 
 def barycentric(tri, p):
     """Barycentric weights (K, 3) of points p (K, 2) in triangles tri (K, 3, 2)."""
-    a, b, c = tri[:, 0], tri[:, 1], tri[:, 2]
-    area = _cross(b - a, c - a)
-    wa = _cross(b - p, c - p) / area
-    wb = _cross(c - p, a - p) / area
-    return np.stack([wa, wb, 1.0 - wa - wb], axis=1)
+    return np.stack(_Corners(tri).weights(p[:, 0], p[:, 1]), axis=1)
+
+
+class _Corners:
+    """Triangles (K, 3, 2) as columns, for barycentric weights at many points per triangle."""
+
+    def __init__(self, tri):
+        (self.ax, self.ay), (self.bx, self.by), (self.cx, self.cy) = (tri[:, k].T for k in range(3))
+        self.area = (self.bx - self.ax) * (self.cy - self.ay) - (self.by - self.ay) * (self.cx - self.ax)
+
+    def weights(self, px, py):
+        """(wa, wb, wc) at points (px, py), each (K,)."""
+        bx, by, cx, cy = self.bx - px, self.by - py, self.cx - px, self.cy - py
+        wa = (bx * cy - by * cx) / self.area
+        wb = (cx * (self.ay - py) - cy * (self.ax - px)) / self.area
+        return wa, wb, 1.0 - wa - wb
+
+
+def _all_above(weights, limit, inclusive=False):
+    """Where every one of the weights (columns) is above `limit` (or equal, when inclusive)."""
+    above = np.greater_equal if inclusive else np.greater
+    return above(weights[0], limit) & above(weights[1], limit) & above(weights[2], limit)
 
 
 def _cross(a, b):
@@ -79,15 +96,18 @@ def closest_barycentric(tri, p):
 
 def _overlaps_square(tri, corner):
     """Whether each triangle (K, 3, 2) overlaps the unit square at corner (K, 2) with positive
-    area (separating axes: the square's are covered by the candidates' bounding boxes)."""
-    square = corner[:, None, :] + np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [1.0, 1.0]])
+    area (separating axes: the square's are covered by the candidates' bounding boxes). Column
+    by column: numpy reduces a short last axis far slower than it combines columns."""
     hit = np.ones(len(tri), bool)
+    x, y = tri[:, :, 0], tri[:, :, 1]
     for i, j in ((0, 1), (1, 2), (2, 0)):
-        e = tri[:, j] - tri[:, i]
-        normal = np.stack([-e[:, 1], e[:, 0]], axis=1)
-        t = (tri * normal[:, None]).sum(-1)
-        s = (square * normal[:, None]).sum(-1)
-        hit &= (np.minimum(t.max(1), s.max(1)) - np.maximum(t.min(1), s.min(1))) > _EPS * np.abs(normal).sum(1)
+        nx, ny = y[:, i] - y[:, j], x[:, j] - x[:, i]  # the edge's normal
+        t = [x[:, k] * nx + y[:, k] * ny for k in range(3)]
+        # the square's extent along the normal: its corner's, plus the positive parts of nx, ny
+        s_lo = corner[:, 0] * nx + corner[:, 1] * ny + np.minimum(nx, 0.0) + np.minimum(ny, 0.0)
+        s_hi = s_lo + np.abs(nx) + np.abs(ny)
+        t_lo, t_hi = np.minimum(np.minimum(t[0], t[1]), t[2]), np.maximum(np.maximum(t[0], t[1]), t[2])
+        hit &= (np.minimum(t_hi, s_hi) - np.maximum(t_lo, s_lo)) > _EPS * (np.abs(nx) + np.abs(ny))
     return hit
 
 
@@ -119,19 +139,20 @@ def rasterize(uv, resolution, samples, check=None):
         cy = lo[t_idx, 1] + k // np.maximum(size[t_idx, 0], 1)
         cell = cy * r + cx
         corners = tri[t_idx]
-        w = barycentric(corners, np.stack([cx + 0.5, cy + 0.5], axis=1).astype(np.float64))
-        coverage[cell[(w >= -_EPS).all(axis=1)]] = True
+        columns = _Corners(corners)
+        x, y = cx.astype(np.float64), cy.astype(np.float64)
+        coverage[cell[_all_above(columns.weights(x + 0.5, y + 0.5), -_EPS, inclusive=True)]] = True
         hit_any = np.zeros(len(t_idx), bool)
         for j, (ox, oy) in enumerate(offs):
             if check is not None:
                 check()
-            w = barycentric(corners, np.stack([cx + ox, cy + oy], axis=1).astype(np.float64))
-            inside = (w >= -_EPS).all(axis=1)
+            w = columns.weights(x + ox, y + oy)
+            inside = _all_above(w, -_EPS, inclusive=True)
             hit_any |= inside
             keys.append(cell[inside] * len(offs) + j)
-            strict_keys.append(cell[(w > 1e-6).all(axis=1)] * len(offs) + j)
+            strict_keys.append(cell[_all_above(w, 1e-6)] * len(offs) + j)
             tris.append(t_idx[inside])
-            bary.append(w[inside])
+            bary.append(np.stack([v[inside] for v in w], axis=1))
         rest = ~hit_any
         rest[rest] = _overlaps_square(corners[rest], np.stack([cx[rest], cy[rest]], axis=1).astype(np.float64))
         touched_t.append(cell[rest])
