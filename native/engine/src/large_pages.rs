@@ -8,8 +8,11 @@
 //! crates offer together.
 
 use std::alloc::{alloc, dealloc, handle_alloc_error, Layout};
+use std::mem::MaybeUninit;
 use std::ops::{Deref, DerefMut};
 use std::ptr::NonNull;
+
+use rayon::prelude::*;
 
 const LARGE_PAGE: usize = 2 << 20;
 
@@ -24,7 +27,9 @@ pub struct LargePageVec<T: Copy> {
 unsafe impl<T: Copy + Send> Send for LargePageVec<T> {}
 unsafe impl<T: Copy + Sync> Sync for LargePageVec<T> {}
 
-impl<T: Copy> LargePageVec<T> {
+impl<T: Copy + Send + Sync> LargePageVec<T> {
+    /// Written in parallel, a large page at a time: the first write to a fresh page is where
+    /// the kernel clears it, about as long as building the plane table itself on one thread.
     pub fn filled(value: T, len: usize) -> Self {
         let bytes = len.checked_mul(std::mem::size_of::<T>()).expect("array size overflows");
         let align = if bytes >= LARGE_PAGE { LARGE_PAGE } else { std::mem::align_of::<T>() };
@@ -37,7 +42,11 @@ impl<T: Copy> LargePageVec<T> {
             let raw = alloc(layout) as *mut T;
             let Some(ptr) = NonNull::new(raw) else { handle_alloc_error(layout) };
             advise_large_pages(raw as usize, bytes);
-            (0..len).for_each(|i| raw.add(i).write(value));
+            let slots = std::slice::from_raw_parts_mut(raw as *mut MaybeUninit<T>, len);
+            let per_page = (LARGE_PAGE / std::mem::size_of::<T>().max(1)).max(1);
+            slots.par_chunks_mut(per_page).for_each(|page| page.iter_mut().for_each(|slot| {
+                slot.write(value);
+            }));
             ptr
         };
         LargePageVec { ptr, len, layout }
