@@ -143,7 +143,8 @@ def samples(lamp, receivers, index, offsets, points):
             uv = _disk(uv) * 0.5 + 0.5
         v_axis = np.cross(lamp.direction, lamp.axis_u)  # local +Y (local -Z x local +X = +Y)
         local = (uv - 0.5) * [lamp.size, lamp.size_y]
-        pts = lamp.position + local[..., :1] * lamp.axis_u + local[..., 1:] * v_axis
+        axes = np.array([lamp.axis_u, v_axis], np.float64)  # (2, 3): the lamp's +X and +Y
+        pts = np.einsum("pnk,kd->pnd", local, axes) + np.asarray(lamp.position, np.float64)
         area = lamp.size * lamp.size_y * (np.pi / 4 if lamp.shape in ("DISK", "ELLIPSE") else 1.0)
         radiance = 1.0 / (np.pi * area)  # per watt
         to_receiver = receivers[:, None] - pts
@@ -189,7 +190,7 @@ def lamp_light(scene, lamp, points, ng, lobes, index, offsets, lamp_points, offs
     if todo.any():
         rows, cols = np.nonzero(todo)
         lift = _lift(scene, offset)
-        start = points[rows] + ng[rows] * lift
+        start = (points + ng * lift)[rows]
         weight[rows, cols] *= ~scene.occluded(start, pts[rows, cols], offset=offset)
     cosine = np.maximum(np.einsum("pld,pnd->pln", lobes, w), 0.0)
     maps = np.einsum("pln,pn->pl", cosine, weight)[..., None] * lamp.power / np.pi
