@@ -71,7 +71,7 @@ def test_rotation_keeps_band_energies_and_matches_rotated_evaluation():
     assert np.abs(g - f).max() < 1e-4
 
 
-@pytest.mark.parametrize("bands", [1, 2, 3, 5])
+@pytest.mark.parametrize("bands", [1, 2, 3, 5, 8])
 def test_lighting_in_receiver_frames_takes_the_worlds_values(bands):
     """The lightmap's lighting per receiver frame (the engine's rotation, `_native.sh_to_frames`):
     at any direction, the frame's coefficients in local coordinates give the world's value
