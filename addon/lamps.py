@@ -156,7 +156,7 @@ def unsupported(scene) -> list[str]:
     notes = []
     for obj in visible_lamps(scene, _KINDS + ("SUN",)):
         light = obj.data
-        if light.use_nodes and light.node_tree is not None:
+        if _nodes_change_light(light):
             notes.append(f"lamp {obj.name!r}: its nodes (textures, IES, falloff) are ignored")
         if not light.use_shadow:
             notes.append(f"lamp {obj.name!r}: 'Shadow' off is ignored (it casts shadows here)")
@@ -167,6 +167,30 @@ def unsupported(scene) -> list[str]:
         if light.type == "SPOT" and getattr(light, "use_square", False):
             notes.append(f"lamp {obj.name!r}: square spot treated as round")
     return notes
+
+
+def _nodes_change_light(light) -> bool:
+    """Whether the lamp's shader nodes change its light. Up to Blender 5.0 a lamp uses nodes
+    only with `use_nodes` on; later ones give every lamp a tree (a white Emission of strength
+    1 into the Light Output) and always use it (`use_nodes` deprecated: reading it warns).
+    That default tree changes nothing, so it is not reported."""
+    tree = light.node_tree
+    if tree is None or _default_light_tree(tree):
+        return False
+    use_nodes = type(light).bl_rna.properties["use_nodes"]
+    return getattr(use_nodes, "is_deprecated", False) or light.use_nodes
+
+
+def _default_light_tree(tree) -> bool:
+    nodes = {n.bl_idname: n for n in tree.nodes}
+    emission = nodes.get("ShaderNodeEmission")
+    if len(tree.nodes) != 2 or emission is None or "ShaderNodeOutputLight" not in nodes or len(tree.links) != 1:
+        return False
+    link = tree.links[0]
+    return (link.from_node == emission and link.to_node.bl_idname == "ShaderNodeOutputLight"
+            and not any(i.is_linked for i in emission.inputs)
+            and tuple(emission.inputs["Color"].default_value) == (1.0, 1.0, 1.0, 1.0)
+            and emission.inputs["Strength"].default_value == 1.0)
 
 
 # ----------------------------------------------------------------------------------------

@@ -104,7 +104,8 @@ def build(sun, cuts=0, basis_vector=None, scene_name="floor", lamp="none", sky=1
     bg.inputs["Color"].default_value = (1, 1, 1, 1)
     bg.inputs["Strength"].default_value = sky
     material = bpy.data.materials.new("Diffuse")
-    material.use_nodes = True
+    if material.node_tree is None:  # Blender < 5.0 (5.x deprecates use_nodes: always on)
+        material.use_nodes = True
     bsdf = material.node_tree.nodes["Principled BSDF"]
     bsdf.inputs["Base Color"].default_value = (0.8, 0.8, 0.8, 1)
     bsdf.inputs["Roughness"].default_value = 1.0

@@ -73,7 +73,8 @@ def sky(width=256, height=128):
 
 def _material(name, rgb):
     mat = bpy.data.materials.new(name)
-    mat.use_nodes = True
+    if mat.node_tree is None:  # Blender < 5.0 (5.x deprecates use_nodes: always on)
+        mat.use_nodes = True
     bsdf = mat.node_tree.nodes["Principled BSDF"]
     bsdf.inputs["Base Color"].default_value = (*rgb, 1.0)
     bsdf.inputs["Specular IOR Level"].default_value = 0.0  # Lambertian: the bake's model
@@ -102,7 +103,8 @@ def build(folder):
     path = str(pathlib.Path(folder) / "sky.exr")
     write_exr(path, {"": sky()})
     world = bpy.data.worlds.new("Sky")
-    world.use_nodes = True
+    if world.node_tree is None:  # Blender < 5.0
+        world.use_nodes = True
     nodes = world.node_tree.nodes
     texture = nodes.new("ShaderNodeTexEnvironment")
     texture.image = bpy.data.images.load(path)

@@ -60,7 +60,8 @@ def build(albedo, cuts=8, lamp="sun"):
     bg.inputs["Color"].default_value = (1, 1, 1, 1)
     bg.inputs["Strength"].default_value = 1.0 if lamp == "sun" else 0.0
     material = bpy.data.materials.new("Diffuse")
-    material.use_nodes = True
+    if material.node_tree is None:  # Blender < 5.0 (5.x deprecates use_nodes: always on)
+        material.use_nodes = True
     bsdf = material.node_tree.nodes["Principled BSDF"]
     bsdf.inputs["Base Color"].default_value = (albedo, albedo, albedo, 1)
     bsdf.inputs["Roughness"].default_value = 1.0

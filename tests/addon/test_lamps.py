@@ -138,6 +138,16 @@ def test_unrepresentable_lamp_features_are_reported(scene):
     notes = lamps.unsupported(scene)
     assert any("'spot'" in n and "Shadow" in n for n in notes)
     assert any("'area'" in n and "spread" in n for n in notes)
+    assert not any("nodes" in n for n in notes), "a lamp's default node tree (every lamp has one after Blender 5.0) changes nothing"
+
+
+def test_lamp_nodes_are_reported_only_when_they_change_the_light(scene):
+    spot = lamp(scene, "SPOT", (0, 0, 2), energy=10.0)
+    assert not any("nodes" in n for n in lamps.unsupported(scene))
+    if spot.data.node_tree is None:  # up to Blender 5.0: nodes only with use_nodes
+        spot.data.use_nodes = True
+    spot.data.node_tree.nodes["Emission"].inputs["Strength"].default_value = 2.0
+    assert any("'spot'" in n and "nodes" in n for n in lamps.unsupported(scene))
 
 
 @pytest.fixture
