@@ -31,7 +31,8 @@ def build(path, grid=24, frames=12):
     scene.frame_start, scene.frame_end = 1, frames
     scene.hemishadow.lighting_source = "UNIFORM"
     world = bpy.data.worlds.new("World")
-    world.use_nodes = True
+    if bpy.app.version < (5, 0):  # 5.x always uses nodes (use_nodes deprecated)
+        world.use_nodes = True
     world.node_tree.nodes["Background"].inputs["Color"].default_value = (0.6, 0.7, 0.9, 1.0)
     scene.world = world
 

@@ -53,7 +53,8 @@ def render_radiance(exr_path, direction, rotation=None, tmp_path=None):
     camera = probe_camera(scene)
     world = bpy.data.worlds.new("env")
     scene.world = world
-    world.use_nodes = True
+    if bpy.app.version < (5, 0):  # 5.x always uses nodes (use_nodes deprecated)
+        world.use_nodes = True
     nodes, links = world.node_tree.nodes, world.node_tree.links
     env = nodes.new("ShaderNodeTexEnvironment")
     env.image = bpy.data.images.load(str(exr_path))

@@ -13,7 +13,8 @@ def yard(addon):
     addon.engine_bridge.forget()
     scene = bpy.context.scene
     scene.world = bpy.data.worlds.new("World")
-    scene.world.use_nodes = True
+    if bpy.app.version < (5, 0):  # 5.x always uses nodes (use_nodes deprecated)
+        scene.world.use_nodes = True
     scene.world.node_tree.nodes["Background"].inputs["Strength"].default_value = 0.3
     bpy.ops.mesh.primitive_plane_add(size=12.0)
     bpy.ops.mesh.primitive_cube_add(size=1.0, location=(2.0, 0.0, 1.0))

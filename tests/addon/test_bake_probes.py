@@ -16,7 +16,8 @@ def room(addon):
     addon.world.clear_cache()
     scene = bpy.context.scene
     scene.world = bpy.data.worlds.new("World")
-    scene.world.use_nodes = True
+    if bpy.app.version < (5, 0):  # 5.x always uses nodes (use_nodes deprecated)
+        scene.world.use_nodes = True
     background = scene.world.node_tree.nodes["Background"]
     background.inputs["Color"].default_value = (1, 1, 1, 1)
     background.inputs["Strength"].default_value = 1.0

@@ -16,7 +16,8 @@ SIZE = (96, 48)
 
 def _material(name, rgb):
     mat = bpy.data.materials.new(name)
-    mat.use_nodes = True
+    if bpy.app.version < (5, 0):  # 5.x always uses nodes (use_nodes deprecated)
+        mat.use_nodes = True
     mat.node_tree.nodes["Principled BSDF"].inputs["Base Color"].default_value = (*rgb, 1.0)
     return mat
 

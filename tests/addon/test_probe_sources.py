@@ -16,7 +16,8 @@ def dark_scene(addon):
     addon.world.clear_cache()
     scene = bpy.context.scene
     scene.world = bpy.data.worlds.new("World")
-    scene.world.use_nodes = True
+    if bpy.app.version < (5, 0):  # 5.x always uses nodes (use_nodes deprecated)
+        scene.world.use_nodes = True
     scene.world.node_tree.nodes["Background"].inputs["Strength"].default_value = 0.0
     return scene
 
