@@ -106,6 +106,7 @@ def test_lighting_in_receiver_frames_refuses_bad_input():
     with pytest.raises(ValueError, match=r"\(P, 3, 3\)"):
         _native.sh_to_frames(np.zeros((9, 3), np.float32), np.zeros((2, 3, 2), np.float32))
     assert _native.sh_to_frames(np.zeros((9, 3), np.float32), np.zeros((0, 3, 3), np.float32)).shape == (0, 9, 3)
+    assert _native.sh_to_frames(np.zeros((9, 0), np.float32), np.eye(3, dtype=np.float32)[None]).shape == (1, 9, 0)
 
 
 def test_rotation_about_z_by_quarter_turn_maps_x_to_y():

@@ -144,12 +144,15 @@ impl ShRotator {
         self.to_world_lanes(axes, local, out)
     }
 
-    /// The coefficients, in each of `frames` (rows: its x, y, z axes in world space, a
-    /// rotation or a mirror), of `channels` functions given in world space (`world`: K rows of
+    /// The coefficients, in each of `frames` (rows: its x, y, z axes in world space,
+    /// orthonormal: a rotation or a mirror), of `channels` functions given in world space (`world`: K rows of
     /// `channels`): K x `channels` per frame, frame after frame. Each is `to_world` with the
     /// world's axes seen from the frame (the transposed rows), one call per channel.
     pub fn to_frames(&self, world: &[f32], channels: usize, frames: &[[[f32; 3]; 3]]) -> Vec<f32> {
         let k = self.basis.coeffs();
+        if channels == 0 {
+            return Vec::new();
+        }
         let per_channel: Vec<Vec<f32>> = (0..channels).map(|c| (0..k).map(|i| world[i * channels + c]).collect()).collect();
         let mut out = vec![0.0f32; frames.len() * k * channels];
         out.par_chunks_mut(k * channels).zip(frames).for_each(|(out, f)| {
