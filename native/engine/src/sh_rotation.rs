@@ -145,9 +145,10 @@ impl ShRotator {
     }
 
     /// The coefficients, in each of `frames` (rows: its x, y, z axes in world space,
-    /// orthonormal: a rotation or a mirror), of `channels` functions given in world space (`world`: K rows of
-    /// `channels`): K x `channels` per frame, frame after frame. Each is `to_world` with the
-    /// world's axes seen from the frame (the transposed rows), one call per channel.
+    /// orthonormal: a rotation or a mirror), of `channels` functions given in world space
+    /// (`world`: K rows of `channels`): K x `channels` per frame, frame after frame. Each is
+    /// `to_world` with the world's axes seen from the frame (the transposed rows), one call
+    /// per channel.
     pub fn to_frames(&self, world: &[f32], channels: usize, frames: &[[[f32; 3]; 3]]) -> Vec<f32> {
         let k = self.basis.coeffs();
         if channels == 0 {

@@ -149,7 +149,10 @@ def samples(lamp, receivers, index, offsets, points):
         radiance = 1.0 / (np.pi * area)  # per watt
         to_receiver = receivers[:, None] - pts
         d = np.sqrt(np.einsum("pnd,pnd->pn", to_receiver, to_receiver))
-        cos_lamp = np.maximum(to_receiver @ lamp.direction / np.maximum(d, 1e-30), 0.0)
+        # einsum, not `@`: numpy < 2 (Blender 4.2 to 5.0) hands matrix-vector products to
+        # OpenBLAS's threads, which then spin beside the engine (see hemishadow.products)
+        cos_lamp = np.maximum(np.einsum("pnd,d->pn", to_receiver, np.asarray(lamp.direction, np.float64))
+                              / np.maximum(d, 1e-30), 0.0)
         return pts, radiance * area / uv.shape[1] * cos_lamp
     sized = lamp.radius > 0
     uv = _unit_square(p, index, offsets, points, sized)
@@ -168,7 +171,7 @@ def spot_mask(lamp, axis):
     """Cycles' spot attenuation for unit directions from the lamp (P, 3): smoothstep of
     (cos - cos(size / 2)) / ((1 - cos(size / 2)) x blend), a hard cone when blend is 0."""
     cos_half = np.cos(lamp.spot_size / 2)
-    c = axis @ lamp.direction
+    c = np.einsum("pd,d->p", axis, np.asarray(lamp.direction, np.float64))  # not `@`: see `samples`
     if lamp.spot_blend <= 0:
         return (c > cos_half).astype(np.float64)
     x = np.clip((c - cos_half) / ((1 - cos_half) * lamp.spot_blend), 0.0, 1.0)
