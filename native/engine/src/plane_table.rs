@@ -4,7 +4,10 @@
 //! direction d satisfies m.d >= 0. Normals are quantised by a cube map of 6 x R x R texels
 //! (the paper's R = 128 gives 12 MiB); each texel stores the mask of the plane through its
 //! centre direction. Opposite normals map to mirrored texels, so two triangles sharing an
-//! edge get exactly complementary masks along it (no crack, no overlap). Around a shared
+//! edge get exactly complementary masks along it (no crack, no overlap); at power-of-two
+//! resolutions the complement is exact bit for bit, so only the three positive faces are
+//! stored (6 MiB at 128) and a negative face's mask is its mirror's complement, made at
+//! each fetch. Around a shared
 //! vertex the rounded planes of different edges need not meet in one point, which can leave
 //! a sliver open: finely tessellated blockers seen at grazing angles leak a little light (see
 //! docs/algorithm.md). Widening every mask by the quantisation angle closes those slivers but
@@ -19,7 +22,7 @@ use crate::disk_mask::{cell_direction, Mask, MASK_SIDE, MASK_WORDS};
 use crate::error::{Error, Result};
 use crate::large_pages::LargePageVec;
 
-/// The paper's 6 x 128 x 128 texels (12 MiB). 64 (3 MiB, stays in cache) measured 1.06-1.7x
+/// The paper's 6 x 128 x 128 texels (12 MiB, of which 6 are stored). 64 (a quarter of the memory) measured 1.06-1.7x
 /// faster for +0.03 to +0.33 percentage points of median error (docs/benchmarks.md), but its
 /// coarser planes double the worst per-vertex change under rounding (AO 0.011 where the
 /// scale-invariance bound of tests/test_solver_trust.py is 0.005): an option, not the default.
@@ -27,7 +30,32 @@ pub const DEFAULT_RESOLUTION: usize = 128;
 
 pub struct PlaneTable {
     resolution: usize,
+    /// Every face, or only the positive ones (see `Mirrors`).
     masks: LargePageVec<Mask>,
+    mirrors: Option<Mirrors>,
+    /// The disk's cells: a negative face's mask is its mirror's complement within it.
+    disk: Mask,
+}
+
+/// How a texel of the whole table (6 faces) maps onto a table of the positive faces only:
+/// texel (face 2a + 1, R - 1 - i, R - 1 - j) is the mirror of (2a, i, j). With F = R^2 a
+/// power of two, its index within the face is the mirror's XOR (F - 1).
+#[derive(Clone, Copy)]
+struct Mirrors {
+    /// log2 of a face's texel count.
+    face_shift: u32,
+}
+
+impl Mirrors {
+    /// The stored index of `texel`, and all ones when its mask is the stored one's complement.
+    #[inline(always)]
+    fn stored(self, texel: u32) -> (usize, u64) {
+        let face = texel >> self.face_shift;
+        let within = (1u32 << self.face_shift) - 1;
+        let negative = face & 1;
+        let index = ((face >> 1) << self.face_shift) | ((texel & within) ^ (within * negative));
+        (index as usize, 0u64.wrapping_sub(negative as u64))
+    }
 }
 
 /// Cube-map face and texel of a direction; the major axis picks the face.
@@ -182,20 +210,11 @@ fn fill_every_texel(cells: &CellWords, masks: &mut [Mask], first: usize, resolut
     masks.par_chunks_mut(CHUNK).enumerate().for_each(|(c, chunk)| cells.fill(chunk, first + c * CHUNK, resolution));
 }
 
-/// Half the work: each negative face's texel (face + 1, R - 1 - i, R - 1 - j) has exactly the
-/// opposite centre direction of (face, i, j) when R is a power of two (the coordinates
-/// -1 + (i + 0.5) 2 / R are exact), so every dot product is exactly negated and the mask is the
-/// complement within the disk (a cell exactly on the plane would be in both: none is, tested
-/// at every power-of-two resolution up to 256).
-fn build_by_mirrors(cells: &CellWords, masks: &mut [Mask], resolution: usize) {
+/// The positive faces 0, 2, 4 of the whole table, stored one after the other.
+fn fill_positive_faces(cells: &CellWords, masks: &mut [Mask], resolution: usize) {
     let face = resolution * resolution;
-    for (pair, faces) in masks.chunks_mut(2 * face).enumerate() {
-        let (positive, negative) = faces.split_at_mut(face);
+    for (pair, positive) in masks.chunks_mut(face).enumerate() {
         fill_every_texel(cells, positive, 2 * pair * face, resolution);
-        negative.par_iter_mut().enumerate().for_each(|(t, mask)| {
-            let mirror = &positive[face - 1 - t];
-            *mask = Mask(std::array::from_fn(|w| cells.inside[w] & !mirror.0[w]));
-        });
     }
 }
 
@@ -207,13 +226,20 @@ impl PlaneTable {
             )));
         }
         let cells = CellWords::new();
-        let mut masks = LargePageVec::filled(Mask::EMPTY, 6 * resolution * resolution);
+        let disk = Mask(cells.inside);
+        let texels = 6 * resolution * resolution;
         if resolution.is_power_of_two() {
-            build_by_mirrors(&cells, &mut masks, resolution);
-        } else {
-            fill_every_texel(&cells, &mut masks, 0, resolution);
+            // The mirror's exact complement: each dot product is exactly negated, since the
+            // centre coordinates -1 + (i + 0.5) 2 / R are exact, and no cell lies exactly on a
+            // texel's plane (tested at every power-of-two resolution up to 256).
+            let mut masks = LargePageVec::filled(Mask::EMPTY, texels / 2);
+            fill_positive_faces(&cells, &mut masks, resolution);
+            let mirrors = Some(Mirrors { face_shift: (resolution * resolution).trailing_zeros() });
+            return Ok(PlaneTable { resolution, masks, mirrors, disk });
         }
-        Ok(PlaneTable { resolution, masks })
+        let mut masks = LargePageVec::filled(Mask::EMPTY, texels);
+        fill_every_texel(&cells, &mut masks, 0, resolution);
+        Ok(PlaneTable { resolution, masks, mirrors: None, disk })
     }
 
     /// The shared table of a resolution, built on first use.
@@ -238,9 +264,9 @@ impl PlaneTable {
 
     /// Mask of the cells on the positive side of the plane through the origin with normal m.
     #[inline(always)]
-    pub fn lookup(&self, m: [f32; 3]) -> &Mask {
+    pub fn lookup(&self, m: [f32; 3]) -> Mask {
         // texel_of always returns an index below 6 * resolution^2.
-        &self.masks[texel_of(m, self.resolution)]
+        self.mask_at(texel_of(m, self.resolution) as u32)
     }
 
     /// The texel `lookup` reads for normal m (pair with `prefetch` and `mask_at`).
@@ -280,16 +306,26 @@ impl PlaneTable {
         }
     }
 
+    /// The mask of a texel of the whole table (`texel`, `texels`).
     #[inline(always)]
-    pub fn mask_at(&self, texel: u32) -> &Mask {
-        &self.masks[texel as usize]
+    pub fn mask_at(&self, texel: u32) -> Mask {
+        let Some(mirrors) = self.mirrors else { return self.masks[texel as usize] };
+        let (index, complement) = mirrors.stored(texel);
+        let stored = &self.masks[index];
+        Mask(std::array::from_fn(|w| stored.0[w] ^ (self.disk.0[w] & complement)))
+    }
+
+    /// Where a texel's mask is stored.
+    #[inline(always)]
+    fn stored_index(&self, texel: u32) -> usize {
+        self.mirrors.map_or(texel as usize, |m| m.stored(texel).0)
     }
 
     /// Asks the CPU to bring a texel's mask (two 64-byte lines) into cache ahead of its use.
     #[inline(always)]
     pub fn prefetch(&self, texel: u32) {
         #[cfg(target_arch = "x86_64")]
-        if let Some(mask) = self.masks.get(texel as usize) {
+        if let Some(mask) = self.masks.get(self.stored_index(texel)) {
             use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
             let p = mask as *const Mask as *const i8;
             // SAFETY: prefetching is a hint and never faults; both lines lie inside the mask.
@@ -309,11 +345,11 @@ mod tests {
     #[test]
     fn mirrored_faces_give_the_masks_of_their_own_directions() {
         let cells = CellWords::new();
-        for resolution in [4, 8, 64, 128, 256] {
+        for resolution in [4, 8, 12, 64, 96, 128, 256] {
             let mut direct = vec![Mask::EMPTY; 6 * resolution * resolution];
             fill_every_texel(&cells, &mut direct, 0, resolution);
             let table = PlaneTable::build(resolution).unwrap();
-            let differ = (0..direct.len()).filter(|&t| *table.mask_at(t as u32) != direct[t]).count();
+            let differ = (0..direct.len()).filter(|&t| table.mask_at(t as u32) != direct[t]).count();
             assert_eq!(differ, 0, "resolution {resolution}");
         }
     }
@@ -351,16 +387,17 @@ mod tests {
     }
 
     #[test]
-    fn default_table_is_twelve_mebibytes() {
-        assert_eq!(PlaneTable::shared(DEFAULT_RESOLUTION).unwrap().bytes(), 12 * 1024 * 1024);
-        assert_eq!(PlaneTable::shared(64).unwrap().bytes(), 3 * 1024 * 1024);
+    fn power_of_two_tables_keep_the_positive_faces_only() {
+        assert_eq!(PlaneTable::shared(DEFAULT_RESOLUTION).unwrap().bytes(), 6 * 1024 * 1024);
+        assert_eq!(PlaneTable::shared(64).unwrap().bytes(), 3 * 1024 * 1024 / 2);
+        assert_eq!(PlaneTable::shared(12).unwrap().bytes(), 6 * 12 * 12 * 128);
     }
 
     #[test]
     fn up_facing_plane_keeps_the_whole_disk() {
         let table = PlaneTable::shared(DEFAULT_RESOLUTION).unwrap();
-        assert_eq!(*table.lookup([0.0, 0.0, 1.0]), disk());
-        assert_eq!(*table.lookup([0.0, 0.0, -1.0]), Mask::EMPTY);
+        assert_eq!(table.lookup([0.0, 0.0, 1.0]), disk());
+        assert_eq!(table.lookup([0.0, 0.0, -1.0]), Mask::EMPTY);
     }
 
     #[test]

@@ -52,7 +52,7 @@ pub fn lanes_above_horizon(corners: &LocalCorners) -> u32 {
 #[inline(always)]
 pub fn triangle_mask(table: &PlaneTable, a: [f32; 3], b: [f32; 3], c: [f32; 3]) -> Option<Mask> {
     let [ab, bc, ca] = triangle_texels(table, a, b, c)?;
-    Some(Mask::and3(table.mask_at(ab), table.mask_at(bc), table.mask_at(ca)))
+    Some(Mask::and3(&table.mask_at(ab), &table.mask_at(bc), &table.mask_at(ca)))
 }
 
 /// The table texels of the three edge planes whose masks `triangle_mask` ANDs (None when it
@@ -144,7 +144,7 @@ impl Pipeline {
         while bits != 0 {
             let i = bits.trailing_zeros() as usize;
             bits &= bits - 1;
-            mask.or_assign(&Mask::and3(table.mask_at(ab[i]), table.mask_at(bc[i]), table.mask_at(ca[i])));
+            mask.or_assign(&Mask::and3(&table.mask_at(ab[i]), &table.mask_at(bc[i]), &table.mask_at(ca[i])));
         }
         self.pending_lanes = 0;
     }

@@ -76,7 +76,7 @@ def transfer(vertices, triangles, normals=None, *, bands=5, brdf="diffuse", expo
         8x8 grey occlusion term, 2 and 1 integrate finer at a small cost (about half and a
         third of the error; see docs/algorithm.md). None: 4 for diffuse; for phong 2, or 1 above
         exponent 16.
-    table_resolution: R of the 6 x R x R plane table (128 is the paper's 12 MiB table).
+    table_resolution: R of the 6 x R x R plane table (128 is the paper's table: 12 MiB, of which the positive half, 6 MiB, is stored).
     receivers: None for every vertex, or indices (R,) of the vertices to compute: the result is
         then (R, bands*bands), row i for vertex receivers[i] (the whole mesh still blocks).
     progress: None or a callable taking the fraction done (0..1), called on this thread between

@@ -71,7 +71,7 @@ class TransferSolver:
 
     @property
     def memory_bytes(self):
-        """Bytes kept between frames (topology, hierarchy, last frame), the shared 12 MiB
+        """Bytes kept between frames (topology, hierarchy, last frame), the shared 6 MiB
         plane table excepted."""
         return self._solver.memory_bytes
 

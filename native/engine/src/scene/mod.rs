@@ -59,7 +59,7 @@ use traverse::{MaskSink, Walk};
 /// table's quantisation cover cells spuriously, and proxies have fewer, larger triangles.
 pub const DEFAULT_LOD: f32 = 0.15;
 
-/// Plane table of scenes: 6 x 256 x 256 texels (48 MiB, built once per process). Scene
+/// Plane table of scenes: 6 x 256 x 256 texels (24 MiB stored, built once per process). Scene
 /// receivers see far more small, distant triangles than mesh vertices do, and a texel's
 /// rounding of an edge plane (about 1/128 radian at 256) blows a triangle smaller than that
 /// up to a random size: measured against ray casting (bench/scene.py, 100k scenes), 256
@@ -268,7 +268,7 @@ impl Scene {
     }
 
     /// Builds what is missing and refits what moved, and the scene's plane table (once per
-    /// process, 48 MiB, about half a second) so that the first query does not pay for it.
+    /// process, 24 MiB) so that the first query does not pay for it.
     pub fn prepare(&mut self) {
         let _ = PlaneTable::shared(self.table_resolution);
         self.meshes.par_iter_mut().for_each(|m| match &mut m.tree {

@@ -193,7 +193,7 @@ impl DepthSink<'_> {
         let t = self.table;
         for k in 0..self.pending_len {
             let Pending { corners: [a, b, c], ids, tag, texels: [ab, bc, ca] } = self.pending[k];
-            self.draw(Mask::and3(t.mask_at(ab), t.mask_at(bc), t.mask_at(ca)), a, b, c, ids, tag);
+            self.draw(Mask::and3(&t.mask_at(ab), &t.mask_at(bc), &t.mask_at(ca)), a, b, c, ids, tag);
         }
         self.pending_len = 0;
     }
