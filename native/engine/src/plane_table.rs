@@ -3,16 +3,15 @@
 //! A plane through the receiver is given by its normal m; its mask has the cells whose sample
 //! direction d satisfies m.d >= 0. Normals are quantised by a cube map of 6 x R x R texels
 //! (the paper's R = 128 gives 12 MiB); each texel stores the mask of the plane through its
-//! centre direction. Opposite normals map to mirrored texels, so two triangles sharing an
-//! edge get exactly complementary masks along it (no crack, no overlap); at power-of-two
+//! centre direction. Opposite normals map to mirrored texels, so two triangles sharing an edge
+//! get exactly complementary masks along it (no crack, no overlap); at power-of-two
 //! resolutions the complement is exact bit for bit, so only the three positive faces are
-//! stored (6 MiB at 128) and a negative face's mask is its mirror's complement, made at
-//! each fetch. Around a shared
-//! vertex the rounded planes of different edges need not meet in one point, which can leave
-//! a sliver open: finely tessellated blockers seen at grazing angles leak a little light (see
-//! docs/algorithm.md). Widening every mask by the quantisation angle closes those slivers but
-//! was measured to over-occlude real meshes far more (spot: median error 2 % -> 8 %).
-//! Tables are built once per resolution and shared by all threads.
+//! stored (6 MiB at 128) and a negative face's mask is its mirror's complement, made at each
+//! fetch. Around a shared vertex the rounded planes of different edges need not meet in one
+//! point, which can leave a sliver open: finely tessellated blockers seen at grazing angles
+//! leak a little light (see docs/algorithm.md). Widening every mask by the quantisation angle
+//! closes those slivers but was measured to over-occlude real meshes far more (spot: median
+//! error 2 % -> 8 %). Tables are built once per resolution and shared by all threads.
 
 use std::sync::{Arc, Mutex};
 
@@ -22,10 +21,11 @@ use crate::disk_mask::{cell_direction, Mask, MASK_SIDE, MASK_WORDS};
 use crate::error::{Error, Result};
 use crate::large_pages::LargePageVec;
 
-/// The paper's 6 x 128 x 128 texels (12 MiB, of which 6 are stored). 64 (a quarter of the memory) measured 1.06-1.7x
-/// faster for +0.03 to +0.33 percentage points of median error (docs/benchmarks.md), but its
-/// coarser planes double the worst per-vertex change under rounding (AO 0.011 where the
-/// scale-invariance bound of tests/test_solver_trust.py is 0.005): an option, not the default.
+/// The paper's 6 x 128 x 128 texels (12 MiB, of which 6 are stored). 64 (a quarter of the
+/// memory) measured 1.06-1.7x faster for +0.03 to +0.33 percentage points of median error
+/// (docs/benchmarks.md), but its coarser planes double the worst per-vertex change under
+/// rounding (AO 0.011 where the scale-invariance bound of tests/test_solver_trust.py is
+/// 0.005): an option, not the default.
 pub const DEFAULT_RESOLUTION: usize = 128;
 
 pub struct PlaneTable {
