@@ -197,8 +197,9 @@ class Scene:
         return self._native.occluded(pts, tgts, _checks.offset(offset))
 
     def visibility_valid(self, points, normals, *, offset=None):
-        """(`visibility`, `valid`) from one rasterization per receiver through the ordered
-        mode's depth buffer: cheaper than both calls where most receivers need the validity."""
+        """(`visibility`, `valid`), the same values, from one walk per receiver with the
+        blockers split by facing (the ordered walk only where more than half of the disk
+        shows back faces): cheaper than both calls where most receivers need the validity."""
         pts, norms = self._receivers(points, normals)
         return self._native.visibility_valid(pts, norms, _checks.offset(offset))
 

@@ -14,6 +14,7 @@ pub mod affine;
 pub mod bounce_weights;
 pub mod casters;
 pub mod clusters;
+pub mod facing;
 pub mod gather;
 pub mod lobes;
 pub mod ordered;
@@ -48,6 +49,7 @@ use crate::transfer::{check_brdf, checked_downsample, Settings};
 use affine::Affine;
 use bounce_weights::BounceWeights;
 use clusters::{union, MeshTree, EMPTY_BOX};
+use facing::FacingSink;
 use ordered::{DepthSink, Rgb};
 use top::TopTree;
 use traverse::{MaskSink, Walk};
@@ -375,7 +377,7 @@ impl Scene {
 
     /// Whether each receiver is outside solid geometry (see `receivers`).
     pub fn valid(&mut self, points: &[Vec3], normals: &[Vec3], offset: Option<f32>) -> Result<Vec<bool>> {
-        self.depth_buffers(points, normals, offset, |sink| receivers::is_valid(&sink.back))
+        Ok(self.visibility_valid(points, normals, offset)?.1)
     }
 
     /// Per segment from `points[i]` to `targets[i]`, whether any triangle of the scene crosses
@@ -397,13 +399,43 @@ impl Scene {
             .collect())
     }
 
-    /// `visibility` and `valid` from one rasterization per receiver (the ordered mode's depth
-    /// buffer): the mask is the covered cells with pinholes closed as `visibility` closes them.
-    /// Cheaper than both calls where most receivers need the validity (closed rooms).
+    /// `visibility` and `valid`, the same values, from one plain walk per receiver with the
+    /// blockers split by facing (`facing`); only receivers whose back-facing blockers cover
+    /// more than half of the disk take the ordered walk, which tells what is seen first.
     pub fn visibility_valid(&mut self, points: &[Vec3], normals: &[Vec3], offset: Option<f32>) -> Result<(Vec<Mask>, Vec<bool>)> {
+        let split = self.facing_masks(points, normals, offset)?;
         let full = disk();
-        let both = self.depth_buffers(points, normals, offset, |sink| (closed_mask(sink, &full), receivers::is_valid(&sink.back)))?;
-        Ok(both.into_iter().unzip())
+        let masks = split.iter().map(|(front, back)| {
+            let mut mask = *front;
+            mask.or_assign(back);
+            pinholes::close(&mask, &full, traverse::PINHOLE_NEIGHBOURS)
+        });
+        let undecided: Vec<usize> = (0..split.len()).filter(|&i| !receivers::is_valid(&split[i].1)).collect();
+        let mut valid = vec![true; split.len()];
+        if !undecided.is_empty() {
+            let (p, n): (Vec<Vec3>, Vec<Vec3>) = undecided.iter().map(|&i| (points[i], normals[i])).unzip();
+            let exact = self.depth_buffers(&p, &n, offset, |sink| receivers::is_valid(&sink.back))?;
+            undecided.iter().zip(exact).for_each(|(&i, v)| valid[i] = v);
+        }
+        Ok((masks.collect(), valid))
+    }
+
+    /// Per receiver, the raw masks of its front- and back-facing blockers.
+    fn facing_masks(&mut self, points: &[Vec3], normals: &[Vec3], offset: Option<f32>) -> Result<Vec<(Mask, Mask)>> {
+        receivers::check(points, Some(normals))?;
+        let offset = receivers::offset(offset, self.size())?;
+        let table = PlaneTable::shared(self.table_resolution)?;
+        let (trees, positions) = self.walk_parts();
+        let walk = self.scene_walk(&trees, &positions);
+        Ok(points
+            .par_iter()
+            .zip(normals)
+            .map_init(Vec::new, |scratch, (p, n)| {
+                let mut sink = FacingSink::new(&table);
+                walk.run(&receivers::receiver(*p, *n, offset), scratch, &mut sink);
+                sink.finish()
+            })
+            .collect())
     }
 
     /// `read` of each receiver's depth buffer (the ordered mode without radiance).

@@ -205,7 +205,8 @@ impl DepthSink<'_> {
         let (e1, e2) = (sub(b, a), sub(c, a));
         let normal = cross(e1, e2);
         let (nn, na) = (dot(normal, normal), dot(normal, a));
-        // Receiver at the origin: it sees the winding's back when the plane's normal points away.
+        // Receiver at the origin: it sees the winding's back when the plane's normal points away
+        // (`facing::sees_back`, which must agree with this bit for bit).
         let back = tag.facing * na > 0.0;
         let index = self.winners.len() as u32;
         let mut won = false;

@@ -310,3 +310,35 @@ fn mask_walks_through_packets_draw_what_single_triangles_draw() {
     }
     assert!(drawn > 400 * 50, "too few triangles drawn to compare: {drawn}");
 }
+
+#[test]
+fn validity_from_facing_masks_equals_the_ordered_walks() {
+    // A closed room of fine grids with boxes standing on its floor, sunk through it and
+    // mirrored: receivers everywhere (inside the boxes, behind the walls, in open air) get
+    // the validity the ordered walk alone gives, and the masks `visibility` gives.
+    let mut scene = grid_box(12);
+    let (v, t) = cube();
+    let c = scene.add_mesh(&v, &t).unwrap();
+    scene.add_instance(c, &translate(0.3, -0.2, -0.7)).unwrap();
+    scene.add_instance(c, &translate(-0.4, 0.4, -1.0)).unwrap();
+    let mut mirrored = translate(-0.3, -0.5, -0.6);
+    (mirrored[0], mirrored[5], mirrored[10]) = (-0.4, 0.5, 0.3);
+    scene.add_instance(c, &mirrored).unwrap();
+    scene.prepare();
+    let mut state = 5u64;
+    let mut next = || {
+        state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        (state >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
+    };
+    let points: Vec<Vec3> = (0..3000).map(|_| [1.2 * next(), 1.2 * next(), 1.2 * next()]).collect();
+    let normals: Vec<Vec3> = (0..3000).map(|_| [next(), next(), next() + 0.01]).collect();
+    let (masks, valid) = scene.visibility_valid(&points, &normals, None).unwrap();
+    let ordered = scene.depth_buffers(&points, &normals, None, |sink| receivers::is_valid(&sink.back)).unwrap();
+    assert_eq!(valid, ordered);
+    assert_eq!(masks, scene.visibility(&points, &normals, None).unwrap());
+    assert_eq!(scene.valid(&points, &normals, None).unwrap(), ordered);
+    // Both outcomes, and both ways of deciding, occur.
+    let undecided = scene.facing_masks(&points, &normals, None).unwrap().iter().filter(|(_, back)| !receivers::is_valid(back)).count();
+    let invalid = valid.iter().filter(|v| !**v).count();
+    assert!(invalid > 300 && undecided > invalid && undecided < 2500, "invalid {invalid}, undecided {undecided}");
+}

@@ -47,8 +47,9 @@ pub trait Sink {
     /// of single triangles (`packet`): the walk then reads the trees' `TreePackets`.
     const PACKETS: bool = false;
     /// The `lanes` of a packet (corners in the receiver's frame, each lane with a corner
-    /// above the horizon). Called only when `PACKETS` is set.
-    fn packet(&mut self, _corners: &LocalCorners, _lanes: u32) {
+    /// above the horizon) of an instance with `facing` (as `Tag::facing`). Called only when
+    /// `PACKETS` is set.
+    fn packet(&mut self, _corners: &LocalCorners, _lanes: u32, _facing: f32) {
         unreachable!("Sink::packet called on a sink without PACKETS")
     }
     /// True when nothing more can change the result (stops the walk early).
@@ -208,7 +209,7 @@ impl Walk<'_> {
             let coarse = (0..tree.coarse.len()).rev().find(|&k| tree.coarse_error[k].powi(2) * stretch2 < error2 * d2);
             if let Some(k) = coarse {
                 if S::PACKETS {
-                    emit_packets(&local, tree.packets.coarse.of(k), sink);
+                    emit_packets(&local, tree.packets.coarse.of(k), tag.facing, sink);
                 } else {
                     let pushed = &tree.coarse_positions[k];
                     emit(&local, |v| pushed[v], &tree.coarse[k], tag, scratch, sink);
@@ -235,12 +236,12 @@ impl Walk<'_> {
             let node = tree.nodes[n];
             let leaf = node.children[0] == NO_CHILD;
             if far && S::PACKETS {
-                emit_packets(&local, tree.packets.proxies.of(n), sink);
+                emit_packets(&local, tree.packets.proxies.of(n), tag.facing, sink);
             } else if far {
                 let pushed = &tree.proxy_positions[n];
                 emit(&local, |k| pushed[k], &tree.proxies[n], tag, scratch, sink);
             } else if leaf && S::PACKETS {
-                emit_packets(&local, tree.packets.leaves.of(node.leaf as usize), sink);
+                emit_packets(&local, tree.packets.leaves.of(node.leaf as usize), tag.facing, sink);
             } else if leaf {
                 let compact = &tree.leaves[node.leaf as usize];
                 emit(&local, |k| positions[compact.vertices[k] as usize], compact, tag, scratch, sink);
@@ -277,7 +278,7 @@ fn emit<S: Sink>(local: &Local, position: impl Fn(usize) -> Vec3, compact: &Comp
 /// The packets' triangles with a corner above the horizon, in the receiver's frame, to a
 /// sink that takes packets; packets whose box lies below the horizon are skipped whole.
 #[inline(always)]
-fn emit_packets<S: Sink>(local: &Local, packets: &[Packet], sink: &mut S) {
+fn emit_packets<S: Sink>(local: &Local, packets: &[Packet], facing: f32, sink: &mut S) {
     for packet in packets {
         if local.below(&packet.bounds) {
             continue;
@@ -285,7 +286,7 @@ fn emit_packets<S: Sink>(local: &Local, packets: &[Packet], sink: &mut S) {
         let corners = local.apply_packet(packet);
         let lanes = lanes_above_horizon(&corners) & packet.lanes;
         if lanes != 0 {
-            sink.packet(&corners, lanes);
+            sink.packet(&corners, lanes, facing);
         }
     }
 }
@@ -333,7 +334,7 @@ impl Sink for MaskSink<'_> {
     const PACKETS: bool = true;
 
     #[inline(always)]
-    fn packet(&mut self, corners: &LocalCorners, lanes: u32) {
+    fn packet(&mut self, corners: &LocalCorners, lanes: u32, _facing: f32) {
         self.batch.push_packet(self.table, corners, lanes, &mut self.mask);
         self.triangles += lanes.count_ones() as u64;
     }
