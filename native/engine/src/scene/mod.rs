@@ -98,6 +98,16 @@ pub struct Scene {
     stats: SceneStats,
     /// Per instance, a stamp renewed whenever its blockers change (moved, mesh deformed).
     stamps: Vec<u64>,
+    /// Which walk `visibility_valid` takes next (speed only: both give the same values).
+    validity_walk: ValidityWalk,
+}
+
+/// Whether the facing walk decided at least half of `visibility_valid`'s last chunk, and how
+/// many chunks have passed; kept between calls, since a baker asks chunk after chunk.
+#[derive(Clone, Copy)]
+struct ValidityWalk {
+    facing_pays: bool,
+    chunks: usize,
 }
 
 impl Default for Scene {
@@ -119,6 +129,7 @@ impl Scene {
             table_resolution: TABLE_RESOLUTION,
             stats: SceneStats::default(),
             stamps: Vec::new(),
+            validity_walk: ValidityWalk { facing_pays: true, chunks: 0 },
         }
     }
 
@@ -399,10 +410,46 @@ impl Scene {
             .collect())
     }
 
-    /// `visibility` and `valid`, the same values, from one plain walk per receiver with the
-    /// blockers split by facing (`facing`); only receivers whose back-facing blockers cover
-    /// more than half of the disk take the ordered walk, which tells what is seen first.
-    pub fn visibility_valid(&mut self, points: &[Vec3], normals: &[Vec3], offset: Option<f32>) -> Result<(Vec<Mask>, Vec<bool>)> {
+    /// `visibility` and `valid`, the same values. A plain walk with the blockers split by
+    /// facing (`facing`) decides most receivers of open scenes and of rooms of single-sided
+    /// walls; the ordered walk decides the rest. Where it decides few (thick walls, whose outer
+    /// faces lie behind their inner ones), receivers take the ordered walk alone: chunk by
+    /// chunk, the facing walk is kept while it decided at least half of the last chunk (of
+    /// this call or the last), and tried again every `RETRY` chunks.
+    pub fn visibility_valid(&mut self, points: &[Vec3], normals: &[Vec3], offset: Option<f32>) -> Result<MasksAndValidity> {
+        Ok(self.visibility_valid_in(points, normals, offset, VALIDITY_CHUNK)?.0)
+    }
+
+    /// `visibility_valid` in chunks of `chunk`, and how many chunks took the facing walk.
+    fn visibility_valid_in(&mut self, points: &[Vec3], normals: &[Vec3], offset: Option<f32>, chunk: usize) -> Result<(MasksAndValidity, usize)> {
+        receivers::check(points, Some(normals))?;
+        const RETRY: usize = 8;
+        let (mut masks, mut valid) = (Vec::with_capacity(points.len()), Vec::with_capacity(points.len()));
+        let mut by_facing = 0;
+        for start in (0..points.len()).step_by(chunk.max(1)) {
+            let range = start..(start + chunk).min(points.len());
+            let (p, n) = (&points[range.clone()], &normals[range]);
+            let walk = self.validity_walk;
+            self.validity_walk.chunks += 1;
+            let (m, v) = if walk.facing_pays || walk.chunks % RETRY == 0 {
+                by_facing += 1;
+                let (m, v, undecided) = self.by_facing(p, n, offset)?;
+                self.validity_walk.facing_pays = 2 * undecided <= p.len();
+                (m, v)
+            } else {
+                let full = disk();
+                let both = self.depth_buffers(p, n, offset, |sink| (pinholes::close(&sink.raw, &full, traverse::PINHOLE_NEIGHBOURS), receivers::is_valid(&sink.back)))?;
+                both.into_iter().unzip()
+            };
+            masks.extend(m);
+            valid.extend(v);
+        }
+        Ok(((masks, valid), by_facing))
+    }
+
+    /// Masks and validity by the facing walk, the ordered walk where it cannot decide, and
+    /// how many could not be decided.
+    fn by_facing(&mut self, points: &[Vec3], normals: &[Vec3], offset: Option<f32>) -> Result<(Vec<Mask>, Vec<bool>, usize)> {
         let split = self.facing_masks(points, normals, offset)?;
         let full = disk();
         let masks = split.iter().map(|(front, back)| {
@@ -417,7 +464,7 @@ impl Scene {
             let exact = self.depth_buffers(&p, &n, offset, |sink| receivers::is_valid(&sink.back))?;
             undecided.iter().zip(exact).for_each(|(&i, v)| valid[i] = v);
         }
-        Ok((masks.collect(), valid))
+        Ok((masks.collect(), valid, undecided.len()))
     }
 
     /// Per receiver, the raw masks of its front- and back-facing blockers.
@@ -547,6 +594,13 @@ fn hemisphere_view(sink: &DepthSink, full: &Mask) -> HemisphereView {
 fn closed_mask(sink: &DepthSink, full: &Mask) -> Mask {
     pinholes::close(&sink.covered(), full, traverse::PINHOLE_NEIGHBOURS)
 }
+
+/// Per receiver, its visibility mask and whether it is valid.
+type MasksAndValidity = (Vec<Mask>, Vec<bool>);
+
+/// Receivers per chunk of `visibility_valid`, which picks its walk per chunk: a few times the
+/// threads' work units, small beside a lightmap's samples.
+const VALIDITY_CHUNK: usize = 2048;
 
 /// Scene receivers see large blockers near their horizon (floors, walls) far more often than
 /// mesh vertices do: diffuse transfer integrates single cells (`subtract_blocked_cells`, as

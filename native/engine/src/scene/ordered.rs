@@ -65,6 +65,9 @@ pub struct DepthSink<'a> {
     pub depth: [f32; MASK_CELLS],
     /// Cells whose nearest blocker shows its back.
     pub back: Mask,
+    /// Every blocker's table mask OR-ed, as the plain mask walk draws them (`covered` leaves
+    /// out cells whose ray misses a blocker's plane).
+    pub raw: Mask,
     pub colour: [Rgb; MASK_CELLS],
     pub triangles: u64,
     /// Triangles that won a cell, and per cell the index of its winner: barycentric weights
@@ -94,6 +97,7 @@ impl<'a> DepthSink<'a> {
             radiance,
             depth: [f32::INFINITY; MASK_CELLS],
             back: Mask::EMPTY,
+            raw: Mask::EMPTY,
             colour: [[0.0; 3]; MASK_CELLS],
             triangles: 0,
             winners: Vec::new(),
@@ -193,7 +197,9 @@ impl DepthSink<'_> {
         let t = self.table;
         for k in 0..self.pending_len {
             let Pending { corners: [a, b, c], ids, tag, texels: [ab, bc, ca] } = self.pending[k];
-            self.draw(Mask::and3(&t.mask_at(ab), &t.mask_at(bc), &t.mask_at(ca)), a, b, c, ids, tag);
+            let covered = Mask::and3(&t.mask_at(ab), &t.mask_at(bc), &t.mask_at(ca));
+            self.raw.or_assign(&covered);
+            self.draw(covered, a, b, c, ids, tag);
         }
         self.pending_len = 0;
     }

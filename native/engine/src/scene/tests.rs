@@ -330,15 +330,25 @@ fn validity_from_facing_masks_equals_the_ordered_walks() {
         state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
         (state >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
     };
-    let points: Vec<Vec3> = (0..3000).map(|_| [1.2 * next(), 1.2 * next(), 1.2 * next()]).collect();
+    // First 800 inside the first box (chunks the facing walk cannot decide), then anywhere.
+    let inside: Vec<Vec3> = (0..800).map(|_| [0.3 + 0.45 * next(), -0.2 + 0.45 * next(), -0.7 + 0.45 * next()]).collect();
+    let points: Vec<Vec3> = inside.into_iter().chain((0..2200).map(|_| [1.2 * next(), 1.2 * next(), 1.2 * next()])).collect();
     let normals: Vec<Vec3> = (0..3000).map(|_| [next(), next(), next() + 0.01]).collect();
-    let (masks, valid) = scene.visibility_valid(&points, &normals, None).unwrap();
     let ordered = scene.depth_buffers(&points, &normals, None, |sink| receivers::is_valid(&sink.back)).unwrap();
-    assert_eq!(valid, ordered);
-    assert_eq!(masks, scene.visibility(&points, &normals, None).unwrap());
+    let visibility = scene.visibility(&points, &normals, None).unwrap();
+    for chunk in [64, VALIDITY_CHUNK] {
+        scene.validity_walk = ValidityWalk { facing_pays: true, chunks: 0 };
+        let ((masks, valid), by_facing) = scene.visibility_valid_in(&points, &normals, None, chunk).unwrap();
+        assert_eq!(valid, ordered, "chunk {chunk}");
+        assert_eq!(masks, visibility, "chunk {chunk}");
+        let chunks = points.len().div_ceil(chunk);
+        if chunk == 64 {
+            assert!(by_facing > 1 && by_facing < chunks - 5, "{by_facing} of {chunks} chunks by facing");
+        }
+    }
     assert_eq!(scene.valid(&points, &normals, None).unwrap(), ordered);
     // Both outcomes, and both ways of deciding, occur.
     let undecided = scene.facing_masks(&points, &normals, None).unwrap().iter().filter(|(_, back)| !receivers::is_valid(back)).count();
-    let invalid = valid.iter().filter(|v| !**v).count();
+    let invalid = ordered.iter().filter(|v| !**v).count();
     assert!(invalid > 300 && undecided > invalid && undecided < 2500, "invalid {invalid}, undecided {undecided}");
 }
