@@ -423,6 +423,7 @@ impl Scene {
     /// `visibility_valid` in chunks of `chunk`, and how many chunks took the facing walk.
     fn visibility_valid_in(&mut self, points: &[Vec3], normals: &[Vec3], offset: Option<f32>, chunk: usize) -> Result<(MasksAndValidity, usize)> {
         receivers::check(points, Some(normals))?;
+        receivers::offset(offset, self.size())?; // refused even with no points
         const RETRY: usize = 8;
         let (mut masks, mut valid) = (Vec::with_capacity(points.len()), Vec::with_capacity(points.len()));
         let mut by_facing = 0;
