@@ -191,3 +191,33 @@ def test_still_casters_are_not_rasterized_again():
     # Frames 0-1 learn which caster moves; 2-3 rasterize only the box; 4 (the ball moved) all.
     assert counts[2][0] < 0.2 * counts[2][1] and counts[3][0] < 0.2 * counts[3][1], counts
     assert counts[4][0] == counts[4][1], counts
+
+
+def test_a_cancelled_solve_leaves_the_caster_masks_as_they_were():
+    """A solve cancelled after its first chunk of receivers (of 5) has written part of the
+    next frame's masks: the solver must go on from the last complete frame's, bit for bit
+    with a fresh solve, and still rasterize only the moving caster."""
+    pv, pt = grid(1.0, 64)
+    _, (bv, bt) = plane_and_box()
+    ball = trimesh.creation.icosphere(subdivisions=2, radius=0.2)
+    scene, (box, sphere) = scene_of((bv, bt), (np.asarray(ball.vertices), np.asarray(ball.faces)))
+    ball_at = np.eye(4)
+    ball_at[:3, 3] = (0.0, 0.3, 0.35)
+    scene.set_matrix(sphere, ball_at)
+    solver = hemishadow.TransferSolver(pv, pt)
+    fresh = hemishadow.TransferSolver(pv, pt, reuse=False)
+
+    def box_at(x):
+        m = np.eye(4)
+        m[0, 3] = x
+        scene.set_matrix(box, m)
+
+    for x in (-0.5, -0.3, 0.0):  # the solver learns that the box moves and the ball does not
+        box_at(x)
+        solver.solve(pv, casters=scene)
+    box_at(0.3)
+    with pytest.raises(hemishadow.Cancelled):
+        solver.solve(pv, casters=scene, progress=lambda fraction: False)
+    box_at(0.2)
+    np.testing.assert_array_equal(solver.solve(pv, casters=scene), fresh.solve(pv, casters=scene))
+    assert solver.stats["blockers_per_vertex"] < 0.2 * fresh.stats["blockers_per_vertex"], (solver.stats, fresh.stats)

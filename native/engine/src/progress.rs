@@ -24,13 +24,35 @@ pub fn par_rows<S>(
     init: impl Fn() -> S + Sync + Send,
     work: impl Fn(usize, &mut S, &mut [f32]) + Sync + Send,
 ) -> Result<()> {
-    let rows = out.len() / k.max(1);
+    par_rows_with::<S, ()>(out, k, &mut [], progress, init, |row, scratch, values, _| work(row, scratch, values))
+}
+
+/// `par_rows` with one more item per row, `extra[row]`, given to `work` as well; an empty
+/// `extra` gives None to every row.
+pub fn par_rows_with<S, T: Send>(
+    out: &mut [f32],
+    k: usize,
+    extra: &mut [T],
+    progress: Progress,
+    init: impl Fn() -> S + Sync + Send,
+    work: impl Fn(usize, &mut S, &mut [f32], Option<&mut T>) + Sync + Send,
+) -> Result<()> {
+    let k = k.max(1);
+    let rows = out.len() / k;
+    assert!(extra.is_empty() || extra.len() == rows, "par_rows_with: {} extra items for {rows} rows", extra.len());
     let chunk = chunk_rows(rows);
     let mut done = 0;
-    for block in out.chunks_mut(chunk * k.max(1)) {
+    let mut extra_blocks = extra.chunks_mut(chunk);
+    for block in out.chunks_mut(chunk * k) {
         let first = done;
-        block.par_chunks_mut(k).enumerate().for_each_init(&init, |scratch, (i, row)| work(first + i, scratch, row));
-        done += block.len() / k;
+        let rows_here = block.chunks_mut(k).len();
+        match extra_blocks.next() {
+            Some(items) => block.par_chunks_mut(k).zip(items.par_iter_mut()).enumerate().for_each_init(&init, |scratch, (i, (row, item))| {
+                work(first + i, scratch, row, Some(item))
+            }),
+            None => block.par_chunks_mut(k).enumerate().for_each_init(&init, |scratch, (i, row)| work(first + i, scratch, row, None)),
+        }
+        done += rows_here;
         if !progress(done as f32 / rows as f32) {
             return Err(Error::Cancelled);
         }
@@ -74,6 +96,27 @@ mod tests {
         assert!(out.chunks(2).enumerate().all(|(r, row)| row == [r as f32, r as f32]));
         assert_eq!(*reports.last().unwrap(), 1.0);
         assert!(reports.windows(2).all(|w| w[0] < w[1]));
+    }
+
+    #[test]
+    fn extra_items_pair_with_their_rows() {
+        let mut out = vec![0.0f32; 5000 * 3];
+        let mut extra: Vec<usize> = (0..5000).map(|r| r * 7).collect();
+        par_rows_with(&mut out, 3, &mut extra, &mut |_| true, || (), |r, _, row, item| {
+            let item = item.unwrap();
+            row.fill(*item as f32);
+            *item = r;
+        })
+        .unwrap();
+        assert!(out.chunks(3).enumerate().all(|(r, row)| row == [(r * 7) as f32; 3]));
+        assert!(extra.iter().enumerate().all(|(r, &x)| x == r));
+        let mut none = vec![0.0f32; 10];
+        par_rows_with::<(), u8>(&mut none, 1, &mut [], &mut |_| true, || (), |_, _, row, item| {
+            assert!(item.is_none());
+            row[0] = 1.0;
+        })
+        .unwrap();
+        assert!(none.iter().all(|&x| x == 1.0));
     }
 
     #[test]

@@ -7,7 +7,7 @@
 //! blockers did not move.
 
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
 
 use rayon::prelude::*;
 
@@ -17,7 +17,7 @@ use crate::group_tree::{is_far, GroupTree, FAR_LOD, LEAF};
 use crate::hierarchy::{default_coarse_triangles, morton_permutation, Hierarchy, GROUP};
 use crate::integrate::{Brdf, Quadrature};
 use crate::mesh::{box_of, check_finite, weld, welded_normals, Normalization, Vec3};
-use crate::progress::{par_rows, Progress};
+use crate::progress::{par_rows, par_rows_with, Progress};
 use crate::pvs::{contributing, Pvs};
 use crate::plane_table::PlaneTable;
 use crate::packets::{PacketLists, LANES};
@@ -103,6 +103,8 @@ pub struct Solver {
     quadrature: Quadrature,
     disk: Mask,
     last: Option<LastFrame>,
+    /// The caster masks' second buffer (`solve_with_casters`).
+    spare_masks: Vec<Kept>,
     pvs: Option<Pvs>,
     stats: Stats,
 }
@@ -161,6 +163,7 @@ impl Solver {
             quadrature: Quadrature::new(downsample, basis),
             disk: disk(),
             last: None,
+            spare_masks: Vec::new(),
             pvs: None,
             stats: Stats::default(),
         })
@@ -192,7 +195,7 @@ impl Solver {
                 + l.node_bounds.len() * 24
                 + l.transfer.len() * 4
                 + l.casters.as_ref().map_or(0, CasterCache::bytes)
-        });
+        }) + self.spare_masks.capacity() * size_of::<Kept>();
         (self.remap.len() + self.first_copy.len() + self.receiver_order.len()) * 4
             + self.fine.len() * 12
             + h.coarse.len() * 12
@@ -239,31 +242,38 @@ impl Solver {
         let still = self.reusable_receivers(&frame, casters.is_some());
         let cache = self.last.as_ref().and_then(|l| l.casters.as_ref());
         let plan = casters.map(|c| CasterPlan::new(cache, c));
+        // This frame's masks go to the buffer the frame before last used (no allocation, no
+        // zeroing); the last frame's stay readable, and stay the cache if this solve is cancelled.
         let keep_masks = casters.is_some() && self.blockers.reuse;
-        let masks: Vec<Mutex<Kept>> = (0..if keep_masks { frame.positions.len() } else { 0 }).map(|_| Mutex::default()).collect();
+        let mut masks = std::mem::take(&mut self.spare_masks);
+        masks.resize(if keep_masks { frame.positions.len() } else { 0 }, Kept::default());
         let k = self.coeffs();
         let mut ordered = vec![0.0f32; frame.positions.len() * k];
         let (blockers, reused) = (AtomicU64::new(0), AtomicU64::new(0));
-        par_rows(&mut ordered, k, progress, Vec::new, |i, scratch, out| {
+        let solved = par_rows_with(&mut ordered, k, &mut masks, progress, Vec::new, |i, scratch, out, slot| {
             let r = self.receiver_order[i] as usize;
             let copy = still[r] && plan.as_ref().is_none_or(|p| p.unchanged);
             let step = match (&self.last, copy) {
                 (Some(last), true) => {
                     out.copy_from_slice(&last.transfer[r * k..(r + 1) * k]);
                     reused.fetch_add(1, Ordering::Relaxed);
-                    Step { base: cache.map(|c| c.masks[r]), count: 0 }
+                    Step { base: cache.map(|c| c.masks[i]), count: 0 }
                 }
                 _ => {
                     let cached = cache.zip(self.last.as_ref()).filter(|_| still[r] && plan.as_ref().is_some_and(|p| p.masks_valid));
-                    let cached = cached.map(|(c, last)| (c.masks[r], &last.transfer[r * k..(r + 1) * k]));
+                    let cached = cached.map(|(c, last)| (c.masks[i], &last.transfer[r * k..(r + 1) * k]));
                     self.receiver(r, &frame, casters.zip(plan.as_ref()), cached, scratch, out)
                 }
             };
             blockers.fetch_add(step.count, Ordering::Relaxed);
-            if let (Some(slot), Some(base)) = (masks.get(r), step.base) {
-                *slot.lock().unwrap_or_else(|e| e.into_inner()) = base;
+            if let (Some(slot), Some(base)) = (slot, step.base) {
+                *slot = base;
             }
-        })?;
+        });
+        if let Err(error) = solved {
+            self.spare_masks = masks;
+            return Err(error);
+        }
         let mut welded = vec![0.0f32; ordered.len()];
         for (row, &r) in ordered.chunks_exact(k).zip(&self.receiver_order) {
             welded[r as usize * k..(r as usize + 1) * k].copy_from_slice(row);
@@ -278,7 +288,8 @@ impl Solver {
         };
         let result = self.remap.iter().flat_map(|&w| welded[w as usize * k..(w as usize + 1) * k].iter().copied()).collect();
         if self.blockers.reuse {
-            let masks = masks.into_iter().map(|m| m.into_inner().unwrap_or_else(|e| e.into_inner())).collect();
+            let last_masks = self.last.as_mut().and_then(|l| l.casters.as_mut()).map(|c| std::mem::take(&mut c.masks));
+            self.spare_masks = last_masks.unwrap_or_default();
             let casters = casters.zip(plan).map(|(c, p)| p.into_cache(c, masks));
             let Frame { positions, normals, views, node_bounds, use_pvs, .. } = frame;
             self.last = Some(LastFrame { positions, normals, views, node_bounds, used_pvs: use_pvs, casters, transfer: welded });
