@@ -520,8 +520,9 @@ impl Solver {
             out.fill(0.0);
             return Step { base: Some(Kept::default()), count: 0 };
         };
-        let occlude = |skip: &[u32], scratch: &mut Vec<Vec3>| match casters {
-            Some((c, _)) => c.occlude(&self.table, &self.normalization, &receiver, skip, scratch),
+        // Each walk stops once the cells it has not drawn are blocked already (`occlude`).
+        let occlude = |skip: &[u32], known: Mask, scratch: &mut Vec<Vec3>| match casters {
+            Some((c, _)) => c.occlude(&self.table, &self.normalization, &receiver, skip, known, scratch),
             None => (Mask::EMPTY, 0),
         };
         let ((own, still), mut count) = match cached {
@@ -529,7 +530,7 @@ impl Solver {
             None => {
                 let (own, count) = self.own_mask(r, frame, &receiver);
                 let (still, more) = match casters.filter(|_| own != self.disk) {
-                    Some((_, plan)) => occlude(&plan.skip_moving, scratch),
+                    Some((_, plan)) => occlude(&plan.skip_moving, own, scratch),
                     None => (Mask::EMPTY, 0),
                 };
                 ((own, still), count + more)
@@ -537,7 +538,9 @@ impl Solver {
         };
         let mut total = own;
         if let Some((c, plan)) = casters.filter(|_| own != self.disk) {
-            let (mut cast, more) = occlude(&plan.skip_still, scratch);
+            let mut known = own;
+            known.or_assign(&still);
+            let (mut cast, more) = occlude(&plan.skip_still, known, scratch);
             cast.or_assign(&still);
             total.or_assign(&c.close_pinholes(&cast));
             count += more;

@@ -120,10 +120,16 @@ impl Casters<'_> {
     /// (ascending, see `skipping`), and the triangle count. Finish the union of a receiver's
     /// raw masks with `close_pinholes`.
     ///
+    /// `known`: cells the caller blocks anyway (its own and other blockers'). The walk stops
+    /// once the mask and `known` cover the whole disk: the receiver is blocked everywhere
+    /// whatever the rest would add, so the mask may lack cells of `known`, and its union
+    /// with `known`, pinholes closed or not, is the whole disk either way.
+    ///
     /// `table` is the solver's: the scene's finer one (`TABLE_RESOLUTION`) made the demo's
     /// cloth, lying on Suzanne, a third slower (63 against 48 ms per frame) for shadows the
     /// solver's own blockers are drawn with the coarser table anyway.
-    pub fn occlude(&self, table: &PlaneTable, normalization: &Normalization, receiver: &Receiver, skip: &[u32], scratch: &mut Vec<Vec3>) -> (Mask, u64) {
+    #[allow(clippy::too_many_arguments)]
+    pub fn occlude(&self, table: &PlaneTable, normalization: &Normalization, receiver: &Receiver, skip: &[u32], known: Mask, scratch: &mut Vec<Vec3>) -> (Mask, u64) {
         let place = &self.key.to_world;
         let Frame { t, b, n } = receiver.frame;
         let world = Receiver {
@@ -133,7 +139,7 @@ impl Casters<'_> {
         let scene = self.scene;
         let top = scene.top.as_ref().expect("prepared by Scene::casters");
         let walk = Walk { trees: &self.trees, positions: &self.positions, instances: &scene.instances, top, lod: scene.lod, exclude: skip, near_proxies: true };
-        let mut sink = MaskSink::new(table, self.full);
+        let mut sink = MaskSink::knowing(table, self.full, known);
         walk.run(&world, scratch, &mut sink);
         sink.finish_raw()
     }

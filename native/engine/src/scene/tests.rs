@@ -352,3 +352,56 @@ fn validity_from_facing_masks_equals_the_ordered_walks() {
     let invalid = ordered.iter().filter(|v| !**v).count();
     assert!(invalid > 300 && undecided > invalid && undecided < 2500, "invalid {invalid}, undecided {undecided}");
 }
+
+#[test]
+fn a_walk_that_knows_blocked_cells_stops_early_with_the_same_union() {
+    // Receivers inside a closed room of grids, their rim and one half of the disk known to be
+    // blocked (as a solver's own blockers would be): the walk stops before it has drawn
+    // everything, and the known cells with the walk's mask, pinholes closed or not, are what
+    // they are with the whole walk's mask.
+    let mut scene = grid_box(12);
+    scene.prepare();
+    let (trees, positions) = scene.walk_parts();
+    let walk = scene.scene_walk(&trees, &positions);
+    let table = PlaneTable::shared(crate::plane_table::DEFAULT_RESOLUTION).unwrap();
+    let full = disk();
+    let mut known = Mask::EMPTY;
+    for row in 0..crate::disk_mask::MASK_SIDE {
+        for col in 0..crate::disk_mask::MASK_SIDE {
+            let rim = [row, col].iter().any(|&i| i == 0 || i == crate::disk_mask::MASK_SIDE - 1)
+                || [(-1i32, 0i32), (1, 0), (0, -1), (0, 1)].iter().any(|(dr, dc)| {
+                    let (r, c) = (row as i32 + dr, col as i32 + dc);
+                    !(0..32).contains(&r) || !(0..32).contains(&c) || !full.get(r as usize, c as usize)
+                });
+            if full.get(row, col) && (rim || col < 16) {
+                known.set(row, col);
+            }
+        }
+    }
+    let mut state = 5u64;
+    let mut next = || {
+        state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        (state >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
+    };
+    let (mut stopped, mut drawn_all, mut drawn_knowing) = (0, 0, 0);
+    for _ in 0..100 {
+        let receiver = receivers::receiver([0.8 * next(), 0.8 * next(), 0.8 * next()], [next(), next(), next() + 0.01], 1e-4);
+        let mut whole = MaskSink::new(&table, full);
+        walk.run(&receiver, &mut Vec::new(), &mut whole);
+        let (whole, all) = whole.finish_raw();
+        let mut knowing = MaskSink::knowing(&table, full, known);
+        walk.run(&receiver, &mut Vec::new(), &mut knowing);
+        let (part, some) = knowing.finish_raw();
+        let union = |m: &Mask| {
+            let mut u = *m;
+            u.or_assign(&known);
+            u
+        };
+        assert_eq!(union(&part), union(&whole));
+        let closed = |m: &Mask| union(&pinholes::close(m, &full, traverse::PINHOLE_NEIGHBOURS));
+        assert_eq!(closed(&part), closed(&whole));
+        stopped += usize::from(some < all);
+        (drawn_all, drawn_knowing) = (drawn_all + all, drawn_knowing + some);
+    }
+    assert!(stopped >= 50 && drawn_knowing < drawn_all * 19 / 20, "stopped early {stopped} of 100 times, {drawn_knowing} of {drawn_all} triangles drawn");
+}

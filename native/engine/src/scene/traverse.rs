@@ -302,13 +302,21 @@ pub struct MaskSink<'a> {
     table: &'a PlaneTable,
     batch: TriangleBatch,
     pub mask: Mask,
+    /// The walk stops once `mask` and `known` cover this.
     full: Mask,
+    known: Mask,
     pub triangles: u64,
 }
 
 impl<'a> MaskSink<'a> {
     pub fn new(table: &'a PlaneTable, full: Mask) -> Self {
-        MaskSink { table, batch: TriangleBatch::default(), mask: Mask::EMPTY, full, triangles: 0 }
+        Self::knowing(table, full, Mask::EMPTY)
+    }
+
+    /// A sink whose walk also stops once `mask` covers what `known` (cells the caller has
+    /// blocked already) leaves open: what more it would draw falls inside `known`.
+    pub fn knowing(table: &'a PlaneTable, full: Mask, known: Mask) -> Self {
+        MaskSink { table, batch: TriangleBatch::default(), mask: Mask::EMPTY, full, known, triangles: 0 }
     }
 
     pub fn finish(self) -> (Mask, u64) {
@@ -340,6 +348,8 @@ impl Sink for MaskSink<'_> {
     }
 
     fn done(&self) -> bool {
-        self.mask == self.full
+        let mut covered = self.mask;
+        covered.or_assign(&self.known);
+        covered == self.full
     }
 }
