@@ -81,6 +81,14 @@ def _lighting_changed(scene):
     return True
 
 
+def lighting_seen(scene):
+    """The live objects were just computed under the lighting as it is (Live switched on):
+    record it, so that the next update does not shade them all again (which would also
+    replace the computation's timings with the shading's), and report it."""
+    _lighting_seen[scene.name] = lighting.fingerprint(scene)
+    lighting.report(scene)
+
+
 def reshade_live(scene, live=None):
     """Re-shade the live objects with the lighting as it is now (a valid bake cache re-shades
     its own), and tell the user what they must know about that lighting."""

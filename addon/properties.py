@@ -53,9 +53,10 @@ def _probe_changed(self, context):
 
 def _live_changed(self, context):
     if self.live:
-        from . import engine_bridge
+        from . import engine_bridge, handlers
 
         engine_bridge.update_scene(context.scene, context.evaluated_depsgraph_get())
+        handlers.lighting_seen(context.scene)
     else:
         from . import jobs
 

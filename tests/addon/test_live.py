@@ -151,6 +151,23 @@ def test_lighting_change_reshades_without_transfer(scene, monkeypatch):
     assert solves == []
 
 
+def test_switching_live_on_shades_once(scene, monkeypatch):
+    """Switching Live on computes under the lighting as it is: the update its writes cause
+    shades nothing again, so the first computation's timings stay on show."""
+    obj = grid_with_box()
+    reshaded = []
+    reshade = engine_bridge.reshade_object
+    monkeypatch.setattr(engine_bridge, "reshade_object", lambda o, *a, **k: reshaded.append(o.name) or reshade(o, *a, **k))
+    scene.hemishadow.live = True
+    timing = engine_bridge.last_timings[obj.name]
+    bpy.context.view_layer.update()
+    scene.frame_set(scene.frame_current)
+    assert reshaded == []
+    assert engine_bridge.last_timings[obj.name] == timing
+    scene.hemishadow.intensity = 2.0  # a real change of the lighting still shades again
+    assert reshaded == [obj.name]
+
+
 def test_handlers_do_not_loop_and_follow_poses(scene, monkeypatch):
     (obj,) = import_character("cesium_man.glb")
     scene.hemishadow.live = True
