@@ -349,6 +349,10 @@ def main(argv=None):
     bpy.ops.hemishadow.live_toggle()   # switched on: computes the enabled objects at once
     if not scene.hemishadow.live:
         raise SystemExit("demo_blender: hemishadow.live_toggle did not switch Live on")
+    unshaded = [o for o in objects if o.name not in engine_bridge.last_timings]
+    if unshaded:  # the add-on reported why (console, status): stop rather than time nothing
+        raise SystemExit("demo_blender: Live computed nothing for " + "; ".join(
+            f"{o.name} ({o.hemishadow.status or 'no status'})" for o in unshaded))
     print(f"Live on at frame {scene.frame_start}, first computation: " + ", ".join(
         f"{name} {t[0]} vertices, engine {t[2] * 1e3:.1f} ms, Blender I/O {t[1] * 1e3:.1f} ms"
         for name, t in engine_bridge.last_timings.items()))
