@@ -14,8 +14,8 @@ Suzanne with Subdivision Surface, a subdivided floor, Blender's forest HDRI):
   the writes, reading the cache, the handlers).
 
 Per mode: the median over frames 2..N of `scene.frame_set` (wall and CPU of all threads),
-and for `casters` the add-on's own split per object (read, solve, shade, write). Prints a
-Markdown table.
+and for `self` and `casters` the add-on's own split per object (read, solve, shade, write).
+Prints Markdown tables.
 """
 
 import argparse
@@ -57,7 +57,7 @@ def run_mode(mode, frames):
         demo.shadow_casters(scene, objects)
     scene.frame_set(1)
     bpy.ops.hemishadow.live_toggle()
-    split = _split_timer(engine_bridge) if mode == "casters" else None
+    split = _split_timer(engine_bridge) if mode in ("self", "casters") else None
     if mode == "casters, cached":
         bake.bake_range(scene, objects, 1, frames)
         scene.frame_set(1)
@@ -122,11 +122,13 @@ def main():
     base = [run["wall"] for run in runs["self"]]
     ratio = [c["wall"] / s for c, s in zip(runs["casters"], base)]
     print(f"\ncasters / self, wall, per round: {', '.join(f'{x:.2f}' for x in ratio)}")
-    splits = [run["split"] for run in runs["casters"]]
-    print("\n| step of a frame with casters (ms per frame) | " + " | ".join(f"round {i + 1}" for i in range(len(splits))) + " |")
-    print("|---|" + "---|" * len(splits))
-    for key in splits[0]:
-        print(f"| {key} | " + " | ".join(f"{s.get(key, 0.0):.2f}" for s in splits) + " |")
+    for mode in ("self", "casters"):
+        splits = [run["split"] for run in runs[mode]]
+        keys = sorted(set().union(*splits))
+        print(f"\n| step of a frame, {mode} (ms per frame) | " + " | ".join(f"round {i + 1}" for i in range(len(splits))) + " |")
+        print("|---|" + "---|" * len(splits))
+        for key in keys:
+            print(f"| {key} | " + " | ".join(f"{s.get(key, 0.0):.2f}" for s in splits) + " |")
     return 0
 
 
