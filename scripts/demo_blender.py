@@ -349,7 +349,7 @@ def main(argv=None):
     bpy.ops.hemishadow.live_toggle()   # switched on: computes the enabled objects at once
     if not scene.hemishadow.live:
         raise SystemExit("demo_blender: hemishadow.live_toggle did not switch Live on")
-    unshaded = [o for o in objects if o.name not in engine_bridge.last_timings]
+    unshaded = [o for o in objects if o.hemishadow.enabled and o.name not in engine_bridge.last_timings]
     if unshaded:  # the add-on reported why (console, status): stop rather than time nothing
         raise SystemExit("demo_blender: Live computed nothing for " + "; ".join(
             f"{o.name} ({o.hemishadow.status or 'no status'})" for o in unshaded))
