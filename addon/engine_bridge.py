@@ -254,7 +254,8 @@ def finish_object(obj, scene, request, transfer, lighting=None):
 
 def named_errors(obj):
     """Re-raise ValueError / RuntimeError (the engine's, Blender's) with the object's name in
-    front, so every message path says which object failed."""
+    front, so every message path says which object failed; an engine that cannot be imported
+    becomes a RuntimeError saying so."""
     return _named(obj.name)
 
 
@@ -262,6 +263,9 @@ def named_errors(obj):
 def _named(name):
     try:
         yield
+    except ImportError as error:  # a broken install: say so where the user looks (the status)
+        raise RuntimeError(f"{name}: the hemishadow engine could not be loaded ({error}); "
+                           "reinstall the extension for this Blender and platform") from error
     except (ValueError, RuntimeError) as error:
         if not name or str(error).startswith(f"{name}: "):
             raise

@@ -219,6 +219,19 @@ def test_engine_error_stays_in_status(scene, monkeypatch):
         bpy.ops.hemishadow.compute()
 
 
+def test_an_engine_that_cannot_be_imported_is_named_in_the_status(scene, monkeypatch):
+    """A broken install (a wheel for another platform, a missing dependency): Live and the
+    frames it computes say so in the object's status instead of raising from a handler."""
+    obj = grid_with_box()
+    engine_bridge.forget()  # no solver kept from an earlier test
+    monkeypatch.setitem(sys.modules, "hemishadow", None)  # `import hemishadow` raises ImportError
+    scene.hemishadow.live = True
+    scene.frame_set(scene.frame_current + 1)  # must not raise
+    assert "the hemishadow engine could not be loaded" in obj.hemishadow.status, obj.hemishadow.status
+    assert obj.hemishadow.status.startswith(f"{obj.name}: ")
+    assert mesh_io.RADIANCE not in obj.data.attributes
+
+
 def test_phong_uses_camera(scene):
     (obj,) = import_character("cesium_man.glb")
     obj.hemishadow.brdf = "PHONG"
