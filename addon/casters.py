@@ -8,6 +8,9 @@ An object's casters are its own "Shadow casters" collection, else the scene's de
   geometry-nodes instances draw: depsgraph.object_instances) is one scene mesh, shared by its
   users: linked duplicates without modifiers, and every instance of an object, are instances
   of ONE mesh, never copies;
+- an object that only deforms and subdivides (mesh_io.smooths_only) casts with the surface it
+  receives on: its original faces through the first evaluated vertices, on the limit surface.
+  Four times fewer triangles per level, and the same shadow in the viewport and in renders;
 - per frame, a mesh whose evaluated positions hash differently gets `set_vertices`, an
   instance whose matrix changed `set_matrix`; static casters are left alone. A change of
   topology, or of the collection's members, rebuilds the scene (the engine cannot drop a mesh);
@@ -57,6 +60,7 @@ class _Item:
     owner: int | None   # session_uid of the object drawn directly (not through an instancer)
     original: int | None  # vertex count of the source's own mesh (None: geometry made by nodes)
     name: tuple         # names: (instancer, object, persistent id), for the cache's records
+    cage: object = None  # the source's own mesh when it casts instead (see `_cage`)
 
 
 def _mesh_key(source):
@@ -100,12 +104,28 @@ def _items(collection, depsgraph, notes):
         owner = None if instance.is_instance else source.session_uid
         original = len(source.data.vertices) if mesh_key[0] != "geometry" and source.type == "MESH" else None
         items.append(_Item(key, mesh_key, evaluated.data, np.array(instance.matrix_world, np.float64), owner,
-                           original, (drawer.name, source.name, persistent)))
+                           original, (drawer.name, source.name, persistent),
+                           _cage(source, evaluated.data, original, depsgraph)))
     return items
 
 
-def _positions(mesh):
-    return mesh_io.positions_of(mesh)
+def _cage(source, evaluated_mesh, original, depsgraph):
+    """The source's own mesh when its evaluated mesh only refines it (mesh_io.smooths_only):
+    it casts with the surface it receives on, its original faces through the first evaluated
+    vertices (on the limit surface). A fraction of the triangles (4^-levels), and the same
+    shadow in the viewport and in renders, which subdivide further."""
+    if original is None or len(evaluated_mesh.vertices) <= original:
+        return None
+    return source.data if mesh_io.smooths_only(source, depsgraph.mode == "RENDER") else None
+
+
+def _positions(item):
+    return mesh_io.positions_of(item.mesh, None if item.cage is None else item.original)
+
+
+def _faces_of(item):
+    """The mesh whose faces the item casts with."""
+    return item.mesh if item.cage is None else item.cage
 
 
 def _digest(array):
@@ -163,15 +183,15 @@ class CasterScene:
             known = self.meshes.get(mesh_key)
             if known is None:  # skipped at the build (its note stays)
                 continue
-            positions = _positions(item.mesh)
-            counts = (len(positions), len(item.mesh.loop_triangles))
+            positions = _positions(item)
+            counts = (len(positions), len(_faces_of(item).loop_triangles))
             if counts != known.counts:
                 return self._build(items)
             digest = _digest(positions)
             if digest == known.digest:
                 continue
             # Moved: only then are the faces read, to tell a deformation from a new topology.
-            if _faces_digest(item.mesh) != known.faces_digest:
+            if _faces_digest(_faces_of(item)) != known.faces_digest:
                 return self._build(items)
             self.scene.set_vertices(known.id, positions)
             known.digest, changed = digest, True
@@ -191,14 +211,14 @@ class CasterScene:
         self.scene, self.meshes, self.instances, self.build_notes = hemishadow.Scene(), {}, {}, []
         self.version = next(_versions)
         for mesh_key, item in _first_per_mesh(items).items():
-            positions, triangles = _positions(item.mesh), mesh_io.triangles_of(item.mesh)
+            positions, triangles = _positions(item), mesh_io.triangles_of(_faces_of(item))
             try:
                 mesh_id = self.scene.add_mesh(positions, triangles)
             except ValueError as error:
                 self.build_notes.append(f"'{item.name[1]}' skipped: {error}")
                 continue
             self.meshes[mesh_key] = _Mesh(mesh_id, (len(positions), len(triangles)), _digest(positions),
-                                          _faces_digest(item.mesh))
+                                          _faces_digest(_faces_of(item)))
         for item in items:
             known = self.meshes.get(item.mesh_key)
             if known is None:
@@ -403,7 +423,7 @@ def fingerprint(obj, scene, depsgraph):
     rows, sums = [], {}
     for item in sorted(_items(collection, depsgraph, []), key=lambda i: i.name):
         if item.mesh_key not in sums:
-            positions = _positions(item.mesh)
+            positions = mesh_io.positions_of(item.mesh)
             if item.original is not None and item.original <= len(positions):
                 positions = positions[:item.original]
             sums[item.mesh_key] = staleness.fingerprint(positions)

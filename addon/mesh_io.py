@@ -31,6 +31,10 @@ PREFIX = "hemishadow_"
 # Modifiers whose result starts with the original vertices, in order (see the module notes).
 PREFIX_KEEPING = {"SUBSURF", "MULTIRES", "MIRROR", "TRIANGULATE"}
 
+# Modifiers that only refine the surface: the original vertices come first in their result, on
+# the limit surface, at every level (see `smooths_only`).
+SMOOTHING = {"SUBSURF", "MULTIRES"}
+
 # Modifiers that only move vertices (Blender's "OnlyDeform" types) or leave geometry alone.
 DEFORMING = {
     "ARMATURE", "CAST", "CLOTH", "COLLISION", "CORRECTIVE_SMOOTH", "CURVE", "DATA_TRANSFER", "DISPLACE",
@@ -120,6 +124,15 @@ def _blocking_modifier(obj, render):
         if enabled and mod.type not in DEFORMING and mod.type not in PREFIX_KEEPING:
             return mod
     return None
+
+
+def smooths_only(obj, render):
+    """True when the object's enabled modifiers deform it and smooth it (Subdivision Surface,
+    Multiresolution) and do nothing else, at least one smoothing: its original faces through
+    the first evaluated vertices are then the surface it computes on, a coarser version of
+    what it draws, the same in the viewport and in renders whatever their levels."""
+    enabled = [m.type for m in obj.modifiers if (m.show_render if render else m.show_viewport)]
+    return any(t in SMOOTHING for t in enabled) and all(t in SMOOTHING or t in DEFORMING for t in enabled)
 
 
 def _evaluated_local(obj, depsgraph):

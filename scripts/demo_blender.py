@@ -159,17 +159,20 @@ def build_scene(grid: int, frames: int, hdri: str):
     floor.name = "Floor"
     floor.modifiers.new("Collision", "COLLISION")
 
-    # Obstacle: Suzanne looking up, smooth, subdivided after (hemishadow computes on the
-    # original 507 vertices and the Subdivision Surface interpolates the attribute).
+    # Obstacle: Suzanne looking up, smooth, subdivided last (hemishadow computes on the
+    # original 507 vertices and the Subdivision Surface interpolates the attribute). Collision
+    # comes first: the cloth collides with the 507-vertex cage, and Blender can leave the
+    # subdivision till something needs it; after it, Collision would make Blender subdivide
+    # again every time the shadows on Suzanne change (docs/blender.md, "Shadow casters").
     bpy.ops.mesh.primitive_monkey_add(size=1.5, location=(0, 0, 0.7), rotation=(-0.15, 0, 0.3))
     suzanne = bpy.context.object
     suzanne.name = "Suzanne"
     bpy.ops.object.shade_smooth()
-    suzanne.modifiers.new("Subdivision", "SUBSURF").levels = 1
-    suzanne.modifiers["Subdivision"].render_levels = 2
     collision = suzanne.modifiers.new("Collision", "COLLISION").settings
     collision.thickness_outer = 0.03
     collision.cloth_friction = 30.0   # the cloth holds on to the head instead of sliding off
+    suzanne.modifiers.new("Subdivision", "SUBSURF").levels = 1
+    suzanne.modifiers["Subdivision"].render_levels = 2
 
     # Cloth: a grid of grid x grid vertices, 2 m wide, dropped over the back of the head.
     bpy.ops.mesh.primitive_grid_add(x_subdivisions=grid - 1, y_subdivisions=grid - 1, size=2.0,

@@ -423,6 +423,52 @@ def test_a_render_subdividing_a_caster_more_still_uses_the_cache(scene, tmp_path
     assert cache.stale_reason(plane) is None and plane.name not in engine_bridge.last_timings
 
 
+def test_a_subdivided_caster_casts_its_original_faces_at_every_level(scene):
+    """A caster that only deforms and subdivides casts with the surface it receives on: its
+    original faces through the first evaluated vertices (the limit positions of the original
+    ones), whatever its level; the shadow is the engine's Scene of that surface."""
+    plane = ground(scene, segments=16)
+    bpy.ops.mesh.primitive_monkey_add(location=(0.1, 0.0, 0.9))
+    monkey = bpy.context.object
+    monkey.modifiers.new("Bend", "SIMPLE_DEFORM").deform_method = "BEND"
+    subdivision = monkey.modifiers.new("Subdivision", "SUBSURF")
+    casters_collection(scene, [plane, monkey])
+    shadows = {}
+    for level in (1, 2):
+        subdivision.levels = level
+        depsgraph = bpy.context.evaluated_depsgraph_get()
+        shown = monkey.evaluated_get(depsgraph).data
+        assert len(shown.vertices) > len(monkey.data.vertices)
+        known = caster_scene(plane, scene).meshes[("object", monkey.session_uid)]
+        assert known.counts == (len(monkey.data.vertices), len(monkey.data.loop_triangles))
+        shadows[level] = live_ao(scene, plane)
+        first = mesh_io.positions_of(shown, len(monkey.data.vertices))
+        reference = hemishadow.Scene()
+        reference.add_instance(reference.add_mesh(first, mesh_io.triangles_of(monkey.data)), np.array(monkey.matrix_world))
+        points = world_vertices(plane)
+        expected = reference.ambient_occlusion(points, np.tile((0.0, 0.0, 1.0), (len(points), 1)))
+        assert np.abs(shadows[level] - expected).max() < 0.02 and np.abs(shadows[level] - expected).mean() < 0.005
+    assert shadows[1].min() < 0.6, "the monkey shadows the plane"
+    assert np.abs(shadows[1] - shadows[2]).max() < 1e-3, "the same caster at both levels"
+
+
+def test_a_mirrored_caster_casts_all_it_draws(scene):
+    """Mirror adds vertices after the original ones without refining them: the caster is the
+    evaluated mesh, both halves."""
+    plane = ground(scene, segments=16)
+    half = cube(scene, location=(0.0, 0.0, 0.6))
+    half.data.transform(__import__("mathutils").Matrix.Translation((0.5, 0.0, 0.0)))
+    half.modifiers.new("Mirror", "MIRROR")
+    half.modifiers.new("Subdivision", "SUBSURF")
+    casters_collection(scene, [plane, half])
+    shown = half.evaluated_get(bpy.context.evaluated_depsgraph_get()).data
+    known = caster_scene(plane, scene).meshes[("object", half.session_uid)]
+    assert known.counts == (len(shown.vertices), len(shown.loop_triangles))
+    ao = live_ao(scene, plane)
+    points = world_vertices(plane)
+    assert ao[np.linalg.norm(points[:, :2] - (-0.5, 0.0), axis=1) < 0.2].max() < 0.7, "the mirrored half casts"
+
+
 def test_a_bending_quad_whose_diagonal_flips_is_refitted_not_rebuilt(scene, monkeypatch):
     """Blender splits a quad along the other diagonal once it bends concave (a cloth does this
     every few frames): same faces, so the caster is refitted, not rebuilt every frame."""
