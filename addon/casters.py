@@ -11,6 +11,8 @@ An object's casters are its own "Shadow casters" collection, else the scene's de
 - an object that only deforms and subdivides (mesh_io.smooths_only) casts with the surface it
   receives on: its original faces through the first evaluated vertices, on the limit surface.
   Four times fewer triangles per level, and the same shadow in the viewport and in renders;
+  when it only subdivides, its evaluated mesh is not even touched (steady.py: reading it
+  would subdivide it again at every frame);
 - per frame, a mesh whose evaluated positions hash differently gets `set_vertices`, an
   instance whose matrix changed `set_matrix`; static casters are left alone. A change of
   topology, or of the collection's members, rebuilds the scene (the engine cannot drop a mesh);
@@ -31,7 +33,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import mesh_io
+from . import mesh_io, steady
 
 #: Versions of all CasterScenes: a receiver's result names the state of its casters by one.
 _versions = itertools.count(1)
@@ -61,6 +63,7 @@ class _Item:
     original: int | None  # vertex count of the source's own mesh (None: geometry made by nodes)
     name: tuple         # names: (instancer, object, persistent id), for the cache's records
     cage: object = None  # the source's own mesh when it casts instead (see `_cage`)
+    steady: tuple | None = None  # (source, its evaluated object, render) when steady.py knows its positions
 
 
 def _mesh_key(source):
@@ -74,7 +77,7 @@ def _mesh_key(source):
 def _items(collection, depsgraph, notes):
     """The meshes the collection draws, in depsgraph order; what cannot cast goes to `notes`."""
     members = {o.session_uid for o in collection.all_objects}
-    items, geometry = [], {}
+    items, geometry, subdividing = [], {}, {}
     for instance in depsgraph.object_instances:
         evaluated = instance.object
         drawer = (instance.parent if instance.is_instance else evaluated).original
@@ -86,6 +89,18 @@ def _items(collection, depsgraph, notes):
             if evaluated.type not in _NO_SURFACE:
                 kind = mesh_io.NOT_A_MESH.get(evaluated.type, evaluated.type.lower())
                 notes.append(f"'{name}' skipped: a {kind} object casts no shadow (convert it to a mesh)")
+            continue
+        persistent = tuple(instance.persistent_id) if instance.is_instance else ()
+        key = (drawer.session_uid, source.session_uid, persistent)
+        matrix = np.array(instance.matrix_world, np.float64)
+        if _subdivides_only(source, depsgraph, subdividing):
+            # Its evaluated mesh is never touched: reading it would subdivide it (steady.py).
+            if len(source.data.polygons) == 0:
+                notes.append(f"'{name}' skipped: its mesh has no faces")
+                continue
+            items.append(_Item(key, _mesh_key(source), None, matrix, None if instance.is_instance else source.session_uid,
+                               len(source.data.vertices), (drawer.name, source.name, persistent), source.data,
+                               (source, source.evaluated_get(depsgraph), depsgraph.mode == "RENDER")))
             continue
         if len(evaluated.data.polygons) == 0:
             # Geometry nodes that output instances only leave the instancer an empty mesh.
@@ -99,14 +114,21 @@ def _items(collection, depsgraph, notes):
             mesh_key = ("geometry", drawer.session_uid, ordinal)
         else:
             mesh_key = _mesh_key(source)
-        persistent = tuple(instance.persistent_id) if instance.is_instance else ()
-        key = (drawer.session_uid, source.session_uid, persistent)
         owner = None if instance.is_instance else source.session_uid
         original = len(source.data.vertices) if mesh_key[0] != "geometry" and source.type == "MESH" else None
-        items.append(_Item(key, mesh_key, evaluated.data, np.array(instance.matrix_world, np.float64), owner,
-                           original, (drawer.name, source.name, persistent),
+        items.append(_Item(key, mesh_key, evaluated.data, matrix, owner, original, (drawer.name, source.name, persistent),
                            _cage(source, evaluated.data, original, depsgraph)))
     return items
+
+
+def _subdivides_only(source, depsgraph, known):
+    """True when steady.py knows the source's positions without its evaluated mesh (`known`:
+    the answers so far, per source)."""
+    uid = source.session_uid
+    if uid not in known:
+        known[uid] = source.type == "MESH" and steady.applies(source, source.evaluated_get(depsgraph),
+                                                              depsgraph.mode == "RENDER")
+    return known[uid]
 
 
 def _cage(source, evaluated_mesh, original, depsgraph):
@@ -120,6 +142,10 @@ def _cage(source, evaluated_mesh, original, depsgraph):
 
 
 def _positions(item):
+    if item.steady is not None:
+        source, evaluated, render = item.steady
+        return steady.first_positions(source, evaluated, render,
+                                      lambda: mesh_io.positions_of(evaluated.data, item.original))
     return mesh_io.positions_of(item.mesh, None if item.cage is None else item.original)
 
 
@@ -423,7 +449,7 @@ def fingerprint(obj, scene, depsgraph):
     rows, sums = [], {}
     for item in sorted(_items(collection, depsgraph, []), key=lambda i: i.name):
         if item.mesh_key not in sums:
-            positions = mesh_io.positions_of(item.mesh)
+            positions = _positions(item)
             if item.original is not None and item.original <= len(positions):
                 positions = positions[:item.original]
             sums[item.mesh_key] = staleness.fingerprint(positions)

@@ -27,7 +27,7 @@ import numpy as np
 from . import casters as shadow_casters
 from . import mesh_io
 from . import objects as scope
-from . import probe_lighting
+from . import probe_lighting, steady
 
 
 @dataclass
@@ -482,6 +482,7 @@ def forget(obj=None):
         _positions.clear()
         shadow_casters.forget()
         probe_lighting.forget()
+        steady.forget()
     else:
         _entries.pop(obj.session_uid, None)
         _positions.pop(obj.session_uid, None)
@@ -490,6 +491,7 @@ def forget(obj=None):
 def forget_positions():
     """Make the next update of every object compute and write again (after undo or redo the
     attributes may hold other values than the last ones computed), keeping the solvers."""
+    steady.forget()
     for entry in _entries.values():
         entry.fingerprint = None
 

@@ -15,6 +15,10 @@ ORIGINAL mesh (`obj.data`), so the engine must see one position per original ver
 - Any other topology-changing modifier (Decimate, Remesh, Boolean, Geometry Nodes, ...) has
   no such mapping: the object is skipped with a message saying which modifier is in the way.
 
+Reading an evaluated mesh makes Blender finish a trailing Subdivision Surface on the CPU; an
+object whose stack only subdivides it is read once and kept while nothing it depends on
+changes (steady.py), though Blender evaluates it every frame (a Collision modifier does that).
+
 Welding (seams, triangle soups such as fox.glb) is the engine's job: it welds by position.
 """
 
@@ -142,17 +146,24 @@ def smooths_only(obj, render):
 def _evaluated_local(obj, depsgraph):
     """(positions (V, 3) in the object's local space, world matrix) of the evaluated mesh on
     its original topology (see the module notes). Raises SkipObject."""
+    from . import steady
+
     check_computable(obj)
     count = len(obj.data.vertices)
     obj_eval = obj.evaluated_get(depsgraph)
-    mesh_eval = obj_eval.data
-    if len(mesh_eval.vertices) != count:
-        blocker = _blocking_modifier(obj, depsgraph.mode == "RENDER")
-        if blocker is not None or len(mesh_eval.vertices) < count:
-            name = f"modifier '{blocker.name}' ({blocker.type})" if blocker else "a modifier"
-            raise TopologyChanged(f"{obj.name}: {name} changes the vertices in a way hemishadow cannot map back "
-                                  "to the original mesh; move it below the result or apply it")
-    return positions_of(mesh_eval, count), obj_eval.matrix_world
+    render = depsgraph.mode == "RENDER"
+
+    def read():
+        mesh_eval = obj_eval.data
+        if len(mesh_eval.vertices) != count:
+            blocker = _blocking_modifier(obj, render)
+            if blocker is not None or len(mesh_eval.vertices) < count:
+                name = f"modifier '{blocker.name}' ({blocker.type})" if blocker else "a modifier"
+                raise TopologyChanged(f"{obj.name}: {name} changes the vertices in a way hemishadow cannot map "
+                                      "back to the original mesh; move it below the result or apply it")
+        return positions_of(mesh_eval, count)
+
+    return steady.first_positions(obj, obj_eval, render, read), obj_eval.matrix_world
 
 
 def read_evaluated(obj, depsgraph):

@@ -30,7 +30,8 @@ import bpy
 
 from . import mesh_io
 
-__all__ = ["TOLERANCE", "changed_inputs", "evaluated_positions", "fingerprint", "fingerprint_mismatch", "inputs"]
+__all__ = ["TOLERANCE", "changed_inputs", "evaluated_positions", "fingerprint", "fingerprint_mismatch", "inputs",
+           "settings"]
 
 #: A vertex that moved by more than this fraction of the object's bounding-box diagonal makes
 #: the cache stale: well below what shading can show, well above float noise.
@@ -57,11 +58,16 @@ _SIMULATIONS = {"CLOTH", "SOFT_BODY", "COLLISION", "DYNAMIC_PAINT", "PARTICLE_SY
 def evaluated_positions(obj, depsgraph) -> np.ndarray | None:
     """World positions (V, 3) float32 of the object's first V evaluated vertices (V = the
     original count, as mesh_io.read_evaluated uses them), or None when there are fewer."""
+    from . import steady
+
     count = len(obj.data.vertices)
     obj_eval = obj.evaluated_get(depsgraph)
-    if len(obj_eval.data.vertices) < count:
-        return None
-    return mesh_io.to_world(mesh_io.positions_of(obj_eval.data, count), obj_eval.matrix_world)
+
+    def read():
+        return mesh_io.positions_of(obj_eval.data, count) if len(obj_eval.data.vertices) >= count else None
+
+    local = steady.first_positions(obj, obj_eval, depsgraph.mode == "RENDER", read)
+    return None if local is None else mesh_io.to_world(local, obj_eval.matrix_world)
 
 
 @functools.lru_cache(maxsize=4)
@@ -303,6 +309,11 @@ def _animated_paths(obj) -> dict[str, set]:
 
 def _floats(value) -> bytes:
     return np.asarray(value, np.float32).tobytes()
+
+
+def settings(struct) -> list:
+    """(name, value) of a struct's settings, as the digests read them (none left out as animated)."""
+    return _struct_values(struct, "", set())
 
 
 def _struct_values(struct, path: str, animated: set, *, skip=frozenset(), depth=0) -> list:
