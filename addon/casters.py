@@ -40,6 +40,7 @@ _versions = itertools.count(1)
 
 #: Object types that draw nothing a shadow could come from; left out without a note.
 _NO_SURFACE = {"EMPTY", "LIGHT", "LIGHT_PROBE", "CAMERA", "ARMATURE", "LATTICE", "SPEAKER"}
+_NO_FACES = "its mesh has no faces"
 
 
 def collection_of(obj, scene):
@@ -57,7 +58,7 @@ class _Item:
 
     key: tuple          # the instance, stable between frames
     mesh_key: tuple     # what it shares its geometry with
-    mesh: object        # the evaluated bpy Mesh
+    mesh: object        # the evaluated bpy Mesh (None when `steady`: never read)
     matrix: np.ndarray  # (4, 4) float64 world matrix
     owner: int | None   # session_uid of the object drawn directly (not through an instancer)
     original: int | None  # vertex count of the source's own mesh (None: geometry made by nodes)
@@ -91,34 +92,48 @@ def _items(collection, depsgraph, notes):
                 notes.append(f"'{name}' skipped: a {kind} object casts no shadow (convert it to a mesh)")
             continue
         persistent = tuple(instance.persistent_id) if instance.is_instance else ()
-        key = (drawer.session_uid, source.session_uid, persistent)
-        matrix = np.array(instance.matrix_world, np.float64)
+        item = _Item((drawer.session_uid, source.session_uid, persistent), None, None,
+                     np.array(instance.matrix_world, np.float64),
+                     None if instance.is_instance else source.session_uid, None, (drawer.name, source.name, persistent))
         if _subdivides_only(source, depsgraph, subdividing):
-            # Its evaluated mesh is never touched: reading it would subdivide it (steady.py).
-            if len(source.data.polygons) == 0:
-                notes.append(f"'{name}' skipped: its mesh has no faces")
-                continue
-            items.append(_Item(key, _mesh_key(source), None, matrix, None if instance.is_instance else source.session_uid,
-                               len(source.data.vertices), (drawer.name, source.name, persistent), source.data,
-                               (source, source.evaluated_get(depsgraph), depsgraph.mode == "RENDER")))
-            continue
-        if len(evaluated.data.polygons) == 0:
-            # Geometry nodes that output instances only leave the instancer an empty mesh.
-            if len(evaluated.data.vertices) or not any(m.type == "NODES" for m in source.modifiers):
-                notes.append(f"'{name}' skipped: its mesh has no faces")
-            continue
-        if instance.is_instance and source == drawer and evaluated.data.original == evaluated.data:
-            # Geometry made by the instancer's nodes: no datablock to share by; the n-th such
-            # mesh of an instancer is the same one from frame to frame.
-            ordinal = geometry.setdefault((drawer.session_uid, evaluated.data.as_pointer()), len(geometry))
-            mesh_key = ("geometry", drawer.session_uid, ordinal)
+            skipped = _steady_item(item, source, depsgraph)
         else:
-            mesh_key = _mesh_key(source)
-        owner = None if instance.is_instance else source.session_uid
-        original = len(source.data.vertices) if mesh_key[0] != "geometry" and source.type == "MESH" else None
-        items.append(_Item(key, mesh_key, evaluated.data, matrix, owner, original, (drawer.name, source.name, persistent),
-                           _cage(source, evaluated.data, original, depsgraph)))
+            skipped = _drawn_item(item, instance, source, drawer, depsgraph, geometry)
+        if skipped is None:
+            items.append(item)
+        elif skipped:
+            notes.append(f"'{name}' skipped: {skipped}")
     return items
+
+
+def _steady_item(item, source, depsgraph):
+    """Fills in an item whose evaluated mesh is never touched: reading it would subdivide it
+    (steady.py). None, or why it cannot cast."""
+    if len(source.data.polygons) == 0:
+        return _NO_FACES
+    item.mesh_key, item.original, item.cage = _mesh_key(source), len(source.data.vertices), source.data
+    item.steady = (source, source.evaluated_get(depsgraph), depsgraph.mode == "RENDER")
+    return None
+
+
+def _drawn_item(item, instance, source, drawer, depsgraph, geometry):
+    """Fills in an item from its evaluated mesh (`geometry`: the instancers' meshes made by
+    nodes, numbered). None, or why it cannot cast ("" for nothing worth a note)."""
+    mesh = instance.object.data
+    if len(mesh.polygons) == 0:
+        # Geometry nodes that output instances only leave the instancer an empty mesh.
+        return _NO_FACES if len(mesh.vertices) or not any(m.type == "NODES" for m in source.modifiers) else ""
+    if instance.is_instance and source == drawer and mesh.original == mesh:
+        # Geometry made by the instancer's nodes: no datablock to share by; the n-th such
+        # mesh of an instancer is the same one from frame to frame.
+        ordinal = geometry.setdefault((drawer.session_uid, mesh.as_pointer()), len(geometry))
+        item.mesh_key = ("geometry", drawer.session_uid, ordinal)
+    else:
+        item.mesh_key = _mesh_key(source)
+    item.mesh = mesh
+    item.original = len(source.data.vertices) if item.mesh_key[0] != "geometry" and source.type == "MESH" else None
+    item.cage = _cage(source, mesh, item.original, depsgraph)
+    return None
 
 
 def _subdivides_only(source, depsgraph, known):
