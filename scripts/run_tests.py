@@ -36,6 +36,7 @@ PRIMARY = "5.3"
 # The second tier: the tests that go through the installed zip.
 TIER2_TESTS = ["tests/addon/test_package.py", "tests/addon/test_live.py", "tests/addon/test_world.py",
                "tests/addon/test_bake.py", "tests/addon/test_cli.py", "tests/addon/test_casters.py",
+               "tests/addon/test_steady.py",
                "tests/addon/test_lightmaps.py", "tests/addon/test_lightmap_ui.py",
                "tests/addon/test_lightmaps_atlas.py", "tests/addon/test_lightmap_cancel.py",
                "tests/addon/test_bake_probes.py", "tests/addon/test_probe_lighting.py", "tests/addon/test_probe_sources.py",
