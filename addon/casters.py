@@ -64,7 +64,7 @@ class _Item:
     original: int | None  # vertex count of the source's own mesh (None: geometry made by nodes)
     name: tuple         # names: (instancer, object, persistent id), for the cache's records
     cage: object = None  # the source's own mesh when it casts instead (see `_cage`)
-    steady: tuple | None = None  # (source, its evaluated object, render) when steady.py knows its positions
+    steady: tuple | None = None  # (source, depsgraph) when steady.py knows its positions
 
 
 def _mesh_key(source):
@@ -112,7 +112,7 @@ def _steady_item(item, source, depsgraph):
     if len(source.data.polygons) == 0:
         return _NO_FACES
     item.mesh_key, item.original, item.cage = _mesh_key(source), len(source.data.vertices), source.data
-    item.steady = (source, source.evaluated_get(depsgraph), depsgraph.mode == "RENDER")
+    item.steady = (source, depsgraph)
     return None
 
 
@@ -141,8 +141,7 @@ def _subdivides_only(source, depsgraph, known):
     the answers so far, per source)."""
     uid = source.session_uid
     if uid not in known:
-        known[uid] = source.type == "MESH" and steady.applies(source, source.evaluated_get(depsgraph),
-                                                              depsgraph.mode == "RENDER")
+        known[uid] = steady.applies(source, depsgraph)
     return known[uid]
 
 
@@ -158,9 +157,9 @@ def _cage(source, evaluated_mesh, original, depsgraph):
 
 def _positions(item):
     if item.steady is not None:
-        source, evaluated, render = item.steady
-        return steady.first_positions(source, evaluated, render,
-                                      lambda: mesh_io.positions_of(evaluated.data, item.original))
+        source, depsgraph = item.steady
+        return steady.first_positions(source, depsgraph,
+                                      lambda: mesh_io.positions_of(source.evaluated_get(depsgraph).data, item.original))
     return mesh_io.positions_of(item.mesh, None if item.cage is None else item.original)
 
 

@@ -163,7 +163,7 @@ def _evaluated_local(obj, depsgraph):
                                       "back to the original mesh; move it below the result or apply it")
         return positions_of(mesh_eval, count)
 
-    return steady.first_positions(obj, obj_eval, render, read), obj_eval.matrix_world
+    return steady.first_positions(obj, depsgraph, read), obj_eval.matrix_world
 
 
 def read_evaluated(obj, depsgraph):

@@ -66,7 +66,7 @@ def evaluated_positions(obj, depsgraph) -> np.ndarray | None:
     def read():
         return mesh_io.positions_of(obj_eval.data, count) if len(obj_eval.data.vertices) >= count else None
 
-    local = steady.first_positions(obj, obj_eval, depsgraph.mode == "RENDER", read)
+    local = steady.first_positions(obj, depsgraph, read)
     return None if local is None else mesh_io.to_world(local, obj_eval.matrix_world)
 
 

@@ -10,9 +10,12 @@ when it was a caster too.
 
 When an object's stack can only subdivide its own mesh (enabled modifiers: Subdivision Surface
 and ones that leave the geometry as it is; no shape keys; no animation on the mesh), its first
-V evaluated vertices (the ones hemishadow uses, mesh_io) follow from the original mesh and the
+V evaluated vertices (the ones hemishadow uses, mesh_io) follow from its mesh and the
 modifiers' settings alone. `first_positions` keeps them with a signature of those inputs and
-answers from it while the signature holds; any other object is read every time.
+answers from it while the signature holds; any other object is read every time. The mesh
+signed is the depsgraph's copy of it (`Mesh.evaluated_get`), what the modifiers were given:
+an edit Blender has not evaluated yet (`foreach_set` without `update()` in Blender 4.2) is
+signed when Blender evaluates it, not before, so no stale read is ever kept as current.
 """
 
 import numpy as np
@@ -29,10 +32,10 @@ _CREASES = ("crease_vert", "crease_edge")
 _known: dict[int, tuple] = {}
 
 
-def first_positions(obj, obj_eval, render, read):
+def first_positions(obj, depsgraph, read):
     """The object's first evaluated positions: `read()` (which may return None: nothing is
     kept), or the last ones read when nothing they depend on changed since."""
-    signature = _signature(obj, obj_eval, render)
+    signature = _signature(obj, depsgraph)
     if signature is None:
         return read()
     known = _known.get(obj.session_uid)
@@ -50,31 +53,32 @@ def forget():
     _known.clear()
 
 
-def applies(obj, obj_eval, render):
+def applies(obj, depsgraph):
     """True when the object's stack only subdivides it (its positions can be kept)."""
     if obj.type != "MESH" or obj.mode in ("EDIT", "SCULPT"):  # edits not yet in (or not only in) obj.data
         return False
     mesh = obj.data
-    return mesh.shape_keys is None and mesh.animation_data is None and _modifiers(obj_eval, render) is not None
+    return mesh.shape_keys is None and mesh.animation_data is None and _modifiers(obj, depsgraph) is not None
 
 
-def _modifiers(obj_eval, render):
-    """The enabled modifiers when the stack only subdivides, else None."""
-    enabled = [m for m in obj_eval.modifiers if (m.show_render if render else m.show_viewport)]
+def _modifiers(obj, depsgraph):
+    """The enabled modifiers (this frame's settings) when the stack only subdivides, else None."""
+    render = depsgraph.mode == "RENDER"
+    enabled = [m for m in obj.evaluated_get(depsgraph).modifiers if (m.show_render if render else m.show_viewport)]
     kinds = {m.type for m in enabled}
     if "SUBSURF" not in kinds or not kinds <= _PASSIVE | {"SUBSURF"}:
         return None
     return enabled
 
 
-def _signature(obj, obj_eval, render):
+def _signature(obj, depsgraph):
     """A hash of everything the first evaluated positions depend on, or None when the stack
     may move them (then they are read every time)."""
-    if not applies(obj, obj_eval, render):
+    if not applies(obj, depsgraph):
         return None
-    mesh = obj.data
-    settings = [(m.type, staleness.settings(m)) for m in _modifiers(obj_eval, render) if m.type == "SUBSURF"]
-    return hash((render, repr(settings), _values(mesh.vertices, "co", 3, np.float32),
+    mesh = obj.data.evaluated_get(depsgraph)
+    settings = [(m.type, staleness.settings(m)) for m in _modifiers(obj, depsgraph) if m.type == "SUBSURF"]
+    return hash((depsgraph.mode, repr(settings), _values(mesh.vertices, "co", 3, np.float32),
                  _values(mesh.loops, "vertex_index", 1, np.int32), _values(mesh.polygons, "loop_total", 1, np.int32),
                  *(_crease(mesh, name) for name in _CREASES)))
 
