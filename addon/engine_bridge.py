@@ -504,6 +504,7 @@ def prune():
     for uid in [u for u in _entries if u not in alive]:
         del _entries[uid]
         _positions.pop(uid, None)
+    steady.forget(alive)
 
 
 def has_transfer(obj):

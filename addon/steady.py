@@ -49,8 +49,10 @@ def first_positions(obj, depsgraph, read):
     return positions
 
 
-def forget():
-    _known.clear()
+def forget(alive=None):
+    """Drop what is kept: all of it, or that of objects whose session_uid is not in `alive`."""
+    for uid in [u for u in _known if alive is None or u not in alive]:
+        del _known[uid]
 
 
 def applies(obj, depsgraph):

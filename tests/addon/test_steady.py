@@ -182,3 +182,13 @@ def test_a_subdivided_caster_follows_an_edit_of_its_mesh(scene):
         expected = reference.ambient_occlusion(points, np.tile((0.0, 0.0, 1.0), (len(points), 1)))
         assert np.abs(shadows[-1] - expected).max() < 0.02 and np.abs(shadows[-1] - expected).mean() < 0.005
     assert np.abs(shadows[0] - shadows[1]).max() > 0.1, "the shadow moved with the mesh"
+
+
+def test_nothing_is_kept_of_a_deleted_object(scene):
+    monkey = collider(scene)
+    uid = monkey.session_uid
+    used_first(monkey)
+    assert uid in steady._known
+    bpy.data.objects.remove(monkey)
+    engine_bridge.prune()
+    assert uid not in steady._known
