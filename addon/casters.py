@@ -92,9 +92,10 @@ def _items(collection, depsgraph, notes):
                 notes.append(f"'{name}' skipped: a {kind} object casts no shadow (convert it to a mesh)")
             continue
         persistent = tuple(instance.persistent_id) if instance.is_instance else ()
-        item = _Item((drawer.session_uid, source.session_uid, persistent), None, None,
-                     np.array(instance.matrix_world, np.float64),
-                     None if instance.is_instance else source.session_uid, None, (drawer.name, source.name, persistent))
+        item = _Item(key=(drawer.session_uid, source.session_uid, persistent), mesh_key=None, mesh=None,
+                     matrix=np.array(instance.matrix_world, np.float64),
+                     owner=None if instance.is_instance else source.session_uid, original=None,
+                     name=(drawer.name, source.name, persistent))
         if _subdivides_only(source, depsgraph, subdividing):
             skipped = _steady_item(item, source, depsgraph)
         else:

@@ -122,13 +122,13 @@ def check_computable(obj):
         raise SkipObject(f"{obj.name}: the mesh is linked from a library and cannot take attributes")
 
 
-def _enabled_modifiers(obj, render):
+def enabled_modifiers(obj, render):
     """The modifiers the viewport (or a render) evaluates."""
     return [mod for mod in obj.modifiers if (mod.show_render if render else mod.show_viewport)]
 
 
 def _blocking_modifier(obj, render):
-    for mod in _enabled_modifiers(obj, render):
+    for mod in enabled_modifiers(obj, render):
         if mod.type not in DEFORMING and mod.type not in PREFIX_KEEPING:
             return mod
     return None
@@ -139,7 +139,7 @@ def smooths_only(obj, render):
     Multiresolution) and do nothing else, at least one smoothing: its original faces through
     the first evaluated vertices are then the surface it computes on, a coarser version of
     what it draws, the same in the viewport and in renders whatever their levels."""
-    enabled = [mod.type for mod in _enabled_modifiers(obj, render)]
+    enabled = [mod.type for mod in enabled_modifiers(obj, render)]
     return any(t in SMOOTHING for t in enabled) and all(t in SMOOTHING or t in DEFORMING for t in enabled)
 
 

@@ -20,7 +20,7 @@ signed when Blender evaluates it, not before, so no stale read is ever kept as c
 
 import numpy as np
 
-from . import staleness
+from . import mesh_io, staleness
 
 # Modifiers that record the geometry for simulations and pass it on unchanged.
 _PASSIVE = {"COLLISION", "SURFACE"}
@@ -57,29 +57,31 @@ def forget(alive=None):
 
 def applies(obj, depsgraph):
     """True when the object's stack only subdivides it (its positions can be kept)."""
+    return _subdivisions(obj, depsgraph) is not None
+
+
+def _subdivisions(obj, depsgraph):
+    """The object's enabled Subdivision Surface modifiers (this frame's settings) when its
+    stack only subdivides it, else None."""
     if obj.type != "MESH" or obj.mode in ("EDIT", "SCULPT"):  # edits not yet in (or not only in) obj.data
-        return False
-    mesh = obj.data
-    return mesh.shape_keys is None and mesh.animation_data is None and _modifiers(obj, depsgraph) is not None
-
-
-def _modifiers(obj, depsgraph):
-    """The enabled modifiers (this frame's settings) when the stack only subdivides, else None."""
-    render = depsgraph.mode == "RENDER"
-    enabled = [m for m in obj.evaluated_get(depsgraph).modifiers if (m.show_render if render else m.show_viewport)]
+        return None
+    if obj.data.shape_keys is not None or obj.data.animation_data is not None:
+        return None
+    enabled = mesh_io.enabled_modifiers(obj.evaluated_get(depsgraph), depsgraph.mode == "RENDER")
     kinds = {m.type for m in enabled}
     if "SUBSURF" not in kinds or not kinds <= _PASSIVE | {"SUBSURF"}:
         return None
-    return enabled
+    return [m for m in enabled if m.type == "SUBSURF"]
 
 
 def _signature(obj, depsgraph):
     """A hash of everything the first evaluated positions depend on, or None when the stack
     may move them (then they are read every time)."""
-    if not applies(obj, depsgraph):
+    subdivisions = _subdivisions(obj, depsgraph)
+    if subdivisions is None:
         return None
     mesh = obj.data.evaluated_get(depsgraph)
-    settings = [(m.type, staleness.settings(m)) for m in _modifiers(obj, depsgraph) if m.type == "SUBSURF"]
+    settings = [staleness.settings(m) for m in subdivisions]
     return hash((depsgraph.mode, repr(settings), _values(mesh.vertices, "co", 3, np.float32),
                  _values(mesh.loops, "vertex_index", 1, np.int32), _values(mesh.polygons, "loop_total", 1, np.int32),
                  *(_crease(mesh, name) for name in _CREASES)))
