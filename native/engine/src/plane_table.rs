@@ -269,7 +269,7 @@ impl PlaneTable {
         self.mask_at(texel_of(m, self.resolution) as u32)
     }
 
-    /// The texel `lookup` reads for normal m (pair with `prefetch` and `mask_at`).
+    /// The texel `lookup` reads for normal m (pair with `mask_at`, or `code`).
     #[inline(always)]
     pub fn texel(&self, m: [f32; 3]) -> u32 {
         texel_of(m, self.resolution) as u32
@@ -278,7 +278,7 @@ impl PlaneTable {
     /// Texel indices of `LANES` normals given as components (x, y, z), the same as `lookup`'s,
     /// written so that the loop vectorises: the face by selects, the coordinates clamped in
     /// float (NaN to 0, as the saturating casts of `texel_of` do) before an unchecked
-    /// conversion. Pair with `mask_at`.
+    /// conversion. Pair with `mask_at`, or `code` for the pipelined fetches.
     #[inline(always)]
     pub fn texels<const LANES: usize>(&self, x: &[f32; LANES], y: &[f32; LANES], z: &[f32; LANES], out: &mut [u32; LANES]) {
         let resolution = self.resolution as u32;
@@ -315,17 +315,23 @@ impl PlaneTable {
         Mask(std::array::from_fn(|w| stored.0[w] ^ (self.disk.0[w] & complement)))
     }
 
-    /// Where a texel's mask is stored.
+    /// The code of a texel (`texel`, `texels`) for `prefetch_code` and `mask_of_code`: where
+    /// its mask is stored, with `COMPLEMENT` set when it is the stored one's complement. The
+    /// pipelined loops work out the mirror once per triangle edge, not at its prefetch and
+    /// again at its fetch.
     #[inline(always)]
-    fn stored_index(&self, texel: u32) -> usize {
-        self.mirrors.map_or(texel as usize, |m| m.stored(texel).0)
+    pub fn code(&self, texel: u32) -> u32 {
+        let Some(mirrors) = self.mirrors else { return texel };
+        let (index, complement) = mirrors.stored(texel);
+        index as u32 | (complement as u32 & COMPLEMENT)
     }
 
-    /// Asks the CPU to bring a texel's mask (two 64-byte lines) into cache ahead of its use.
+    /// Asks the CPU to bring the mask of a code (`code`), two 64-byte lines, into cache ahead
+    /// of its use.
     #[inline(always)]
-    pub fn prefetch(&self, texel: u32) {
+    pub fn prefetch_code(&self, code: u32) {
         #[cfg(target_arch = "x86_64")]
-        if let Some(mask) = self.masks.get(self.stored_index(texel)) {
+        if let Some(mask) = self.masks.get((code & !COMPLEMENT) as usize) {
             use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
             let p = mask as *const Mask as *const i8;
             // SAFETY: prefetching is a hint and never faults; both lines lie inside the mask.
@@ -335,7 +341,19 @@ impl PlaneTable {
             }
         }
     }
+
+    /// The mask of a code (`code`): `mask_at` of its texel.
+    #[inline(always)]
+    pub fn mask_of_code(&self, code: u32) -> Mask {
+        let stored = &self.masks[(code & !COMPLEMENT) as usize];
+        let complement = 0u64.wrapping_sub((code >> COMPLEMENT.trailing_zeros()) as u64);
+        Mask(std::array::from_fn(|w| stored.0[w] ^ (self.disk.0[w] & complement)))
+    }
 }
+
+/// The bit of a code (`PlaneTable::code`) that marks a complemented mask; tables have fewer
+/// than 2^31 texels (at most 6 x 512 x 512).
+const COMPLEMENT: u32 = 1 << 31;
 
 #[cfg(test)]
 mod tests {
@@ -351,6 +369,18 @@ mod tests {
             let table = PlaneTable::build(resolution).unwrap();
             let differ = (0..direct.len()).filter(|&t| table.mask_at(t as u32) != direct[t]).count();
             assert_eq!(differ, 0, "resolution {resolution}");
+        }
+    }
+
+    #[test]
+    fn codes_give_the_masks_of_their_texels() {
+        for resolution in [12, 64, 128] {
+            let table = PlaneTable::build(resolution).unwrap();
+            for first in (0..6 * resolution * resolution).step_by(8) {
+                for texel in first as u32..(first as u32 + 8).min(6 * (resolution * resolution) as u32) {
+                    assert_eq!(table.mask_of_code(table.code(texel)), table.mask_at(texel), "resolution {resolution}, texel {texel}");
+                }
+            }
         }
     }
 

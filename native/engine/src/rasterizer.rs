@@ -114,8 +114,8 @@ fn lane_bits(lanes: &[bool; LANES]) -> u32 {
 /// arrived.
 #[derive(Default)]
 pub struct Pipeline {
-    /// Texels of the previous packet (`[edge][lane]`) and its kept lanes: prefetched, not yet
-    /// OR-ed.
+    /// Table codes (`PlaneTable::code`) of the previous packet (`[edge][lane]`) and its kept
+    /// lanes: prefetched, not yet OR-ed.
     pending: [[u32; LANES]; 3],
     pending_lanes: u32,
 }
@@ -125,14 +125,18 @@ impl Pipeline {
     /// makes these pending.
     #[inline(always)]
     fn advance(&mut self, table: &PlaneTable, texels: &[[u32; LANES]; 3], lanes: u32, mask: &mut Mask) {
+        let mut codes = [[0u32; LANES]; 3];
         let mut bits = lanes;
         while bits != 0 {
             let i = bits.trailing_zeros() as usize;
             bits &= bits - 1;
-            texels.iter().for_each(|edge| table.prefetch(edge[i]));
+            for e in 0..3 {
+                codes[e][i] = table.code(texels[e][i]);
+                table.prefetch_code(codes[e][i]);
+            }
         }
         self.drain(table, mask);
-        self.pending = *texels;
+        self.pending = codes;
         self.pending_lanes = lanes;
     }
 
@@ -144,7 +148,7 @@ impl Pipeline {
         while bits != 0 {
             let i = bits.trailing_zeros() as usize;
             bits &= bits - 1;
-            mask.or_assign(&Mask::and3(&table.mask_at(ab[i]), &table.mask_at(bc[i]), &table.mask_at(ca[i])));
+            mask.or_assign(&Mask::and3(&table.mask_of_code(ab[i]), &table.mask_of_code(bc[i]), &table.mask_of_code(ca[i])));
         }
         self.pending_lanes = 0;
     }

@@ -34,13 +34,13 @@ pub struct Hit {
     pub weights: [f32; 3],
 }
 
-/// A triangle whose texels are known and whose masks are on their way.
+/// A triangle whose table codes are known and whose masks are on their way.
 #[derive(Clone, Copy)]
 struct Pending {
     corners: [Vec3; 3],
     ids: [u32; 3],
     tag: Tag,
-    texels: [u32; 3],
+    codes: [u32; 3],
 }
 
 /// A triangle that won some cell: what its barycentric weights need.
@@ -56,7 +56,7 @@ struct Winner {
 }
 
 const NO_TAG: Tag = Tag { mesh: 0, instance: 0, facing: 1.0 };
-const NO_PENDING: Pending = Pending { corners: [[0.0; 3]; 3], ids: [0; 3], tag: NO_TAG, texels: [0; 3] };
+const NO_PENDING: Pending = Pending { corners: [[0.0; 3]; 3], ids: [0; 3], tag: NO_TAG, codes: [0; 3] };
 
 pub struct DepthSink<'a> {
     table: &'a PlaneTable,
@@ -180,10 +180,10 @@ impl DepthSink<'_> {
         while bits != 0 {
             let i = bits.trailing_zeros() as usize;
             bits &= bits - 1;
-            let t = [texels[0][i], texels[1][i], texels[2][i]];
-            t.iter().for_each(|&t| self.table.prefetch(t));
+            let t = [0, 1, 2].map(|e| self.table.code(texels[e][i]));
+            t.iter().for_each(|&t| self.table.prefetch_code(t));
             let corner = |k: usize| [self.batch[k][0][i], self.batch[k][1][i], self.batch[k][2][i]];
-            next[next_len] = Pending { corners: [corner(0), corner(1), corner(2)], ids: self.batch_ids[i], tag: self.batch_tags[i], texels: t };
+            next[next_len] = Pending { corners: [corner(0), corner(1), corner(2)], ids: self.batch_ids[i], tag: self.batch_tags[i], codes: t };
             next_len += 1;
         }
         self.batch_len = 0;
@@ -196,8 +196,8 @@ impl DepthSink<'_> {
     fn draw_pending(&mut self) {
         let t = self.table;
         for k in 0..self.pending_len {
-            let Pending { corners: [a, b, c], ids, tag, texels: [ab, bc, ca] } = self.pending[k];
-            let covered = Mask::and3(&t.mask_at(ab), &t.mask_at(bc), &t.mask_at(ca));
+            let Pending { corners: [a, b, c], ids, tag, codes: [ab, bc, ca] } = self.pending[k];
+            let covered = Mask::and3(&t.mask_of_code(ab), &t.mask_of_code(bc), &t.mask_of_code(ca));
             self.raw.or_assign(&covered);
             self.draw(covered, a, b, c, ids, tag);
         }
