@@ -57,14 +57,14 @@ FULL = dict(
     frames=7, eval_frames=(2, 5), receivers=500, reference_side=128, embree_sides=(8, 16, 32, 64, 128),
     hemishadow_budget=1.5, embree_budget=2.0, embree_cap=30.0,
     levels=(0, 1, 2, 3, 4, 5), level_frames=3, embree_levels=(0, 1, 2, 3, 4), curve_side=16, once_above=200_000,
-    warm_up_cap=15.0, level_cap=240.0,
+    warm_up_cap=15.0, level_cap=240.0, pair_levels=(3, 4), pair_rounds=8,
 )
 QUICK = dict(
     meshes=["cloth", "suzanne_2k", "rigged_figure"],
     frames=3, eval_frames=(1,), receivers=150, reference_side=64, embree_sides=(8, 16, 32, 64, 128),
     hemishadow_budget=0.3, embree_budget=0.3, embree_cap=0.5,
     levels=(0, 1, 2), level_frames=2, embree_levels=(0, 1, 2), curve_side=16, once_above=200_000,
-    warm_up_cap=2.0, level_cap=10.0,
+    warm_up_cap=2.0, level_cap=10.0, pair_levels=(1, 2), pair_rounds=3,
 )
 
 
@@ -308,6 +308,39 @@ def vertex_curve(pool, cfg, log):
     return rows
 
 
+def scale_pair(cfg, log):
+    """The cost ratio of two subdivision levels (the target's 126k / 32k), timed in alternation:
+    round after round each level solves its next moving frame, the first one alternating, so
+    that a busy spell of the shared machine hits both alike (timed minutes apart, as the
+    curve's levels are, the ratio moved by a third between runs)."""
+    solvers = []
+    for level in cfg["pair_levels"]:
+        frames, tris = scenes.suzanne(level, n_frames=cfg["level_frames"])
+        tris64 = tris.astype(np.int64)
+        normals = np.stack([reference.vertex_normals(f, tris64) for f in frames]).astype(np.float32)
+        offset = 1e-3 * reference.mean_edge_length(frames[0], tris64)
+        solver = hemishadow.TransferSolver(frames[0], tris, offset=offset, reuse=False)
+        solver.solve(frames[1], normals[1])  # warm-up
+        solvers.append((solver, frames, normals))
+    times = [[], []]
+    for k in range(cfg["pair_rounds"]):
+        for i in (0, 1) if k % 2 == 0 else (1, 0):
+            solver, frames, normals = solvers[i]
+            f = 1 + k % (len(frames) - 1)
+            start = time.perf_counter()
+            solver.solve(frames[f], normals[f])
+            times[i].append(time.perf_counter() - start)
+    ratios = np.array(times[1]) / np.array(times[0])
+    pair = {"levels": list(cfg["pair_levels"]), "vertices": [len(s[1][0]) for s in solvers],
+            "ms": [1e3 * float(np.median(t)) for t in times], "rounds": cfg["pair_rounds"],
+            "ratio": float(np.median(times[1]) / np.median(times[0])),
+            "round_ratio_quartiles": [float(q) for q in np.percentile(ratios, [25, 50, 75])]}
+    log(f"   levels {pair['levels'][1]} / {pair['levels'][0]} in alternation: {pair['ms'][1]:.1f} / {pair['ms'][0]:.1f} ms "
+        f"= {pair['ratio']:.2f}x over {pair['rounds']} rounds (per round: quartiles "
+        + " / ".join(f"{q:.2f}" for q in pair["round_ratio_quartiles"]) + ")")
+    return pair
+
+
 def predict_ms(rows):
     """The next level's solve time (4x the vertices of the last level run), if the growth of
     the cost per vertex between the last two levels continues; 0 before two levels ran."""
@@ -347,6 +380,7 @@ def main():
         if not args.no_curve:
             log("\n== vertex-count curve (Suzanne subdivision levels)")
             results["vertex_curve"] = vertex_curve(pool, cfg, log)
+            results["scale_pair"] = scale_pair(cfg, log)
     results["machine"]["load_after"] = os.getloadavg()
     results["seconds"] = time.perf_counter() - start
     path = HERE / ("results_quick.json" if args.quick else "results.json")
