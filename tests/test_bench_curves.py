@@ -110,3 +110,16 @@ def test_shares_cover_every_receiver_once_in_whole_blocks():
             assert all(first % peers.BLOCK == 0 for first, _ in parts)
             assert [f for f, _ in parts] == sorted(f for f, _ in parts)
             assert all(f + c == g for (f, c), (g, _) in zip(parts, parts[1:]))
+
+
+def test_the_scale_target_reads_the_levels_timed_in_alternation():
+    import report
+
+    curve = [{"level": 3, "ms": 400.0, "vertices": 31658}, {"level": 4, "ms": 2000.0, "vertices": 126290}]
+    pair = {"levels": [3, 4], "vertices": [31658, 126290], "ms": [400.0, 1700.0], "rounds": 8,
+            "ratio": 4.25, "round_ratio_quartiles": [4.0, 4.2, 4.4]}
+    row = report.scale_target({"vertex_curve": curve, "scale_pair": pair})
+    assert "4.25x" in row and "alternation" in row and "quartiles 4.00 / 4.20 / 4.40" in row and "**met**" in row
+    row = report.scale_target({"vertex_curve": curve})  # runs made before scale_pair: the curve's levels
+    assert "5.00x" in row and "**not met**" in row
+    assert "not in this run" in report.scale_target({"vertex_curve": curve[:1]})
