@@ -7,9 +7,10 @@
 //! the 126k-vertex Suzanne took 5.9x the 32k one's time per frame for 4x the vertices.
 //!
 //! Groups are consecutive in the hierarchy's bisection order, so a range of groups the tree
-//! cuts is a compact region; a node covers a range, its leaves are single groups. Proxies keep a subset of the coarse vertices
-//! (meshoptimizer's simplifier with locked borders, `scene::clusters::simplify`), so they
-//! deform with the mesh at no cost, as the coarse mesh does.
+//! cuts is a compact region; a node covers a range, its leaves are single groups. Proxies
+//! keep a subset of the coarse vertices (meshoptimizer's simplifier with locked borders,
+//! `scene::clusters::simplify`), so they deform with the mesh at no cost, as the coarse mesh
+//! does.
 
 use crate::hierarchy::{Hierarchy, GROUP};
 use crate::mesh::{Vec3, EMPTY_BOX};

@@ -309,10 +309,7 @@ impl PlaneTable {
     /// The mask of a texel of the whole table (`texel`, `texels`).
     #[inline(always)]
     pub fn mask_at(&self, texel: u32) -> Mask {
-        let Some(mirrors) = self.mirrors else { return self.masks[texel as usize] };
-        let (index, complement) = mirrors.stored(texel);
-        let stored = &self.masks[index];
-        Mask(std::array::from_fn(|w| stored.0[w] ^ (self.disk.0[w] & complement)))
+        self.mask_of_code(self.code(texel))
     }
 
     /// The code of a texel (`texel`, `texels`) for `prefetch_code` and `mask_of_code`: where
