@@ -222,14 +222,20 @@ def embree_rows(pool, frames, tris64, normals, offset, order, errors_of, cfg, lo
     return rows
 
 
+def prepared(frames, tris):
+    """What every method is given with a mesh: int64 triangles (Embree's), area-weighted vertex
+    normals per frame and the receiver offset (1e-3 x the rest pose's mean edge length)."""
+    tris64 = tris.astype(np.int64)
+    normals = np.stack([reference.vertex_normals(f, tris64) for f in frames]).astype(np.float32)
+    return tris64, normals, 1e-3 * reference.mean_edge_length(frames[0], tris64)
+
+
 def bench_mesh(pool, name, cfg, quick, log):
     t0 = time.perf_counter()
     load_start = os.getloadavg()[0]
     frames, tris = make_mesh(name, cfg, quick)
-    tris64 = tris.astype(np.int64)
+    tris64, normals, offset = prepared(frames, tris)
     n_vertices = frames.shape[1]
-    normals = np.stack([reference.vertex_normals(f, tris64) for f in frames]).astype(np.float32)
-    offset = 1e-3 * reference.mean_edge_length(frames[0], tris64)
     log(f"\n== {name}: {n_vertices} vertices, {len(tris)} triangles, {len(frames)} frames "
         f"(made in {time.perf_counter() - t0:.1f} s)")
     eval_frames = list(cfg["eval_frames"])
@@ -273,9 +279,7 @@ def vertex_curve(pool, cfg, log):
             break
         t0 = time.perf_counter()
         frames, tris = scenes.suzanne(level, n_frames=cfg["level_frames"])
-        tris64 = tris.astype(np.int64)
-        normals = np.stack([reference.vertex_normals(f, tris64) for f in frames]).astype(np.float32)
-        offset = 1e-3 * reference.mean_edge_length(frames[0], tris64)
+        tris64, normals, offset = prepared(frames, tris)
         n_vertices = frames.shape[1]
         made = time.perf_counter() - t0
         solver = hemishadow.TransferSolver(frames[0], tris, offset=offset, reuse=False)
@@ -316,9 +320,7 @@ def scale_pair(cfg, log):
     solvers = []
     for level in cfg["pair_levels"]:
         frames, tris = scenes.suzanne(level, n_frames=cfg["level_frames"])
-        tris64 = tris.astype(np.int64)
-        normals = np.stack([reference.vertex_normals(f, tris64) for f in frames]).astype(np.float32)
-        offset = 1e-3 * reference.mean_edge_length(frames[0], tris64)
+        _, normals, offset = prepared(frames, tris)
         solver = hemishadow.TransferSolver(frames[0], tris, offset=offset, reuse=False)
         solver.solve(frames[1], normals[1])  # warm-up
         solvers.append((solver, frames, normals))
