@@ -2,6 +2,9 @@
 //! triangles; f32 frames x vertices x 3; u32 triangles x 3), for profiling without Python:
 //!
 //!     cargo run --release --example profile_solver -- mesh.bin [downsample] [table] [near_scale] [coarse triangles]
+//!
+//! `PROFILE_SOLVES=N` times exactly N solves (for instruction counts under valgrind, which
+//! are steady where times on a shared machine are not); by default, up to 100 in 5 s.
 
 use std::time::Instant;
 
@@ -43,7 +46,11 @@ fn main() {
     let mut times = Vec::new();
     let start = Instant::now();
     let cpu_start = cpu_ms();
-    while times.len() < 5 || (start.elapsed().as_secs_f32() < 5.0 && times.len() < 100) {
+    let solves = std::env::var("PROFILE_SOLVES").ok().and_then(|n| n.parse::<usize>().ok());
+    while match solves {
+        Some(n) => times.len() < n,
+        None => times.len() < 5 || (start.elapsed().as_secs_f32() < 5.0 && times.len() < 100),
+    } {
         let frame = &frames[1 + times.len() % (frames.len() - 1)];
         let t = Instant::now();
         solver.solve(frame, None, None).unwrap();

@@ -275,15 +275,23 @@ impl PlaneTable {
         texel_of(m, self.resolution) as u32
     }
 
-    /// Texel indices of `LANES` normals given as components (x, y, z), the same as `lookup`'s,
-    /// written so that the loop vectorises: the face by selects, the coordinates clamped in
-    /// float (NaN to 0, as the saturating casts of `texel_of` do) before an unchecked
-    /// conversion. Pair with `mask_at`, or `code` for the pipelined fetches.
+    /// Codes (`code`) of the texels `lookup` reads for `LANES` normals given as components
+    /// (x, y, z), written so that the loop vectorises: the face by selects, the coordinates
+    /// clamped in float (NaN to 0, as the saturating casts of `texel_of` do) before an unchecked
+    /// conversion, and a negative face's mirror by integer selects. For the pipelined fetches
+    /// (`prefetch_code`, `mask_of_code`).
     #[inline(always)]
-    pub fn texels<const LANES: usize>(&self, x: &[f32; LANES], y: &[f32; LANES], z: &[f32; LANES], out: &mut [u32; LANES]) {
+    pub fn codes<const LANES: usize>(&self, x: &[f32; LANES], y: &[f32; LANES], z: &[f32; LANES], out: &mut [u32; LANES]) {
         let resolution = self.resolution as u32;
         let half = 0.5 * self.resolution as f32;
         let last = (self.resolution - 1) as f32;
+        // With mirrors, a negative face's texel is the positive face's mirror (its index within
+        // the face XOR F - 1) and its mask the complement; without, it is stored after it.
+        let face = resolution * resolution;
+        let (axis_stride, negative_offset, flip, complement) = match self.mirrors {
+            Some(_) => (face, 0, face - 1, COMPLEMENT),
+            None => (2 * face, face, 0, 0),
+        };
         for i in 0..LANES {
             let (ax, ay, az) = (x[i].abs(), y[i].abs(), z[i].abs());
             let x_major = ax >= ay && ax >= az;
@@ -293,7 +301,7 @@ impl PlaneTable {
             let u = if x_major { y[i] } else { x[i] };
             let v = if x_major || y_major { z[i] } else { y[i] };
             let axis = if x_major { 0 } else if y_major { 1 } else { 2 };
-            let face = 2 * axis + (along < 0.0) as u32;
+            let negative = if along < 0.0 { u32::MAX } else { 0 };
             let scale = half / major;
             let texel = |w: f32| {
                 let w = w * scale + half;
@@ -302,17 +310,18 @@ impl PlaneTable {
                 // SAFETY: w is finite and in [0, resolution - 1].
                 unsafe { w.to_int_unchecked::<u32>() }
             };
-            out[i] = (face * resolution + texel(v)) * resolution + texel(u);
+            let within = texel(v) * resolution + texel(u);
+            out[i] = (axis * axis_stride + (negative & negative_offset) + (within ^ (negative & flip))) | (negative & complement);
         }
     }
 
-    /// The mask of a texel of the whole table (`texel`, `texels`).
+    /// The mask of a texel of the whole table (`texel`).
     #[inline(always)]
     pub fn mask_at(&self, texel: u32) -> Mask {
         self.mask_of_code(self.code(texel))
     }
 
-    /// The code of a texel (`texel`, `texels`) for `prefetch_code` and `mask_of_code`: where
+    /// The code of a texel (`texel`) for `prefetch_code` and `mask_of_code`: where
     /// its mask is stored, with `COMPLEMENT` set when it is the stored one's complement. The
     /// pipelined loops work out the mirror once per triangle edge, not at its prefetch and
     /// again at its fetch.
@@ -435,8 +444,7 @@ mod tests {
     }
 
     #[test]
-    fn lane_texels_match_lookup_everywhere() {
-        let table = PlaneTable::shared(16).unwrap();
+    fn lane_codes_match_lookup_everywhere() {
         let mut state = 7u64;
         let mut random = move || {
             state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
@@ -451,15 +459,19 @@ mod tests {
         }
         // Ties between axes and texel borders.
         normals.extend((0..64).map(|k| [k as f32 / 8.0 - 4.0, 1.0, k as f32 / 8.0 - 4.0]));
-        for chunk in normals.chunks(8) {
-            let mut xyz = [[0.0f32; 8]; 3];
-            for (i, n) in chunk.iter().enumerate() {
-                (0..3).for_each(|a| xyz[a][i] = n[a]);
-            }
-            let mut out = [0u32; 8];
-            table.texels(&xyz[0], &xyz[1], &xyz[2], &mut out);
-            for (i, n) in chunk.iter().enumerate() {
-                assert_eq!(out[i] as usize, texel_of(*n, 16), "{n:?}");
+        // 16: the positive faces stored, negative ones mirrored; 12: every face stored.
+        for resolution in [16, 12] {
+            let table = PlaneTable::shared(resolution).unwrap();
+            for chunk in normals.chunks(8) {
+                let mut xyz = [[0.0f32; 8]; 3];
+                for (i, n) in chunk.iter().enumerate() {
+                    (0..3).for_each(|a| xyz[a][i] = n[a]);
+                }
+                let mut out = [0u32; 8];
+                table.codes(&xyz[0], &xyz[1], &xyz[2], &mut out);
+                for (i, n) in chunk.iter().enumerate() {
+                    assert_eq!(out[i], table.code(texel_of(*n, resolution) as u32), "resolution {resolution}, {n:?}");
+                }
             }
         }
     }

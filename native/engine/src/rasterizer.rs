@@ -76,11 +76,11 @@ pub fn triangle_texels(table: &PlaneTable, a: [f32; 3], b: [f32; 3], c: [f32; 3]
 /// axis j, lane i is `[k][j][i]`.
 pub type LocalCorners = [[[f32; LANES]; 3]; 3];
 
-/// Texels (edge ab, bc, ca) of every lane's three edge planes, and the bit set of lanes whose
-/// cone has a solid angle. Written lane-parallel and branch-free so that it compiles to
-/// vector instructions.
+/// Table codes (`PlaneTable::code`; edge ab, bc, ca) of every lane's three edge planes, and
+/// the bit set of lanes whose cone has a solid angle. Written lane-parallel and branch-free so
+/// that it compiles to vector instructions.
 #[inline(always)]
-pub fn edge_texels(table: &PlaneTable, corners: &LocalCorners, texels: &mut [[u32; LANES]; 3]) -> u32 {
+pub fn edge_codes(table: &PlaneTable, corners: &LocalCorners, codes: &mut [[u32; LANES]; 3]) -> u32 {
     let [a, b, c] = corners;
     let mut planes = [[[0.0f32; LANES]; 3]; 3]; // edge ab, bc, ca; component; lane
     let mut solid = [false; LANES];
@@ -98,7 +98,7 @@ pub fn edge_texels(table: &PlaneTable, corners: &LocalCorners, texels: &mut [[u3
         }
     }
     for e in 0..3 {
-        table.texels(&planes[e][0], &planes[e][1], &planes[e][2], &mut texels[e]);
+        table.codes(&planes[e][0], &planes[e][1], &planes[e][2], &mut codes[e]);
     }
     lane_bits(&solid)
 }
@@ -121,22 +121,18 @@ pub struct Pipeline {
 }
 
 impl Pipeline {
-    /// Prefetches the masks of the `lanes` of `texels`, ORs the pending ones into `mask` and
+    /// Prefetches the masks of the `lanes` of `codes`, ORs the pending ones into `mask` and
     /// makes these pending.
     #[inline(always)]
-    fn advance(&mut self, table: &PlaneTable, texels: &[[u32; LANES]; 3], lanes: u32, mask: &mut Mask) {
-        let mut codes = [[0u32; LANES]; 3];
+    fn advance(&mut self, table: &PlaneTable, codes: &[[u32; LANES]; 3], lanes: u32, mask: &mut Mask) {
         let mut bits = lanes;
         while bits != 0 {
             let i = bits.trailing_zeros() as usize;
             bits &= bits - 1;
-            for e in 0..3 {
-                codes[e][i] = table.code(texels[e][i]);
-                table.prefetch_code(codes[e][i]);
-            }
+            (0..3).for_each(|e| table.prefetch_code(codes[e][i]));
         }
         self.drain(table, mask);
-        self.pending = codes;
+        self.pending = *codes;
         self.pending_lanes = lanes;
     }
 
@@ -186,9 +182,9 @@ impl Pipeline {
         if candidates == 0 {
             return 0;
         }
-        let mut texels = [[0u32; LANES]; 3];
-        let solid = edge_texels(table, &local, &mut texels);
-        self.advance(table, &texels, candidates & solid, mask);
+        let mut codes = [[0u32; LANES]; 3];
+        let solid = edge_codes(table, &local, &mut codes);
+        self.advance(table, &codes, candidates & solid, mask);
         candidates.count_ones()
     }
 }
@@ -222,9 +218,9 @@ impl TriangleBatch {
     /// through the pipeline, beside any triangles queued one at a time.
     #[inline(always)]
     pub fn push_packet(&mut self, table: &PlaneTable, corners: &LocalCorners, lanes: u32, mask: &mut Mask) {
-        let mut texels = [[0u32; LANES]; 3];
-        let solid = edge_texels(table, corners, &mut texels);
-        self.pipeline.advance(table, &texels, solid & lanes, mask);
+        let mut codes = [[0u32; LANES]; 3];
+        let solid = edge_codes(table, corners, &mut codes);
+        self.pipeline.advance(table, &codes, solid & lanes, mask);
     }
 
     /// Rasterizes everything queued into `mask` and empties the batch and the pipeline.
@@ -236,10 +232,10 @@ impl TriangleBatch {
 
     #[inline(always)]
     fn flush(&mut self, table: &PlaneTable, mask: &mut Mask) {
-        let mut texels = [[0u32; LANES]; 3];
-        let solid = edge_texels(table, &self.corners, &mut texels);
+        let mut codes = [[0u32; LANES]; 3];
+        let solid = edge_codes(table, &self.corners, &mut codes);
         let queued = (1u32 << self.len) - 1;
-        self.pipeline.advance(table, &texels, solid & queued, mask);
+        self.pipeline.advance(table, &codes, solid & queued, mask);
         self.len = 0;
     }
 }

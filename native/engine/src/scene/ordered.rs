@@ -10,7 +10,7 @@ use crate::disk_mask::{cell_direction, Mask, MASK_CELLS, MASK_SIDE};
 use crate::mesh::{sub, Vec3};
 use crate::plane_table::PlaneTable;
 use crate::packets::LANES;
-use crate::rasterizer::{cross, dot, edge_texels, LocalCorners};
+use crate::rasterizer::{cross, dot, edge_codes, LocalCorners};
 
 use super::traverse::{Sink, Tag};
 
@@ -79,7 +79,7 @@ pub struct DepthSink<'a> {
     /// there is).
     keeps_winners: bool,
     /// Triangles in arrival order, a batch at a time: their texels are computed lane-parallel
-    /// when the batch is full (`edge_texels`, as the mask rasterizer does) and prefetched;
+    /// when the batch is full (`edge_codes`, as the mask rasterizer does) and prefetched;
     /// the batch before is drawn then, by when its masks are in cache (the 256 table is 48
     /// MiB; one triangle at a time, texels and fetches were most of a gather's time).
     batch: LocalCorners,
@@ -172,15 +172,15 @@ impl DepthSink<'_> {
     /// Texels of the queued batch, prefetched; draws the pending batch and makes this one pending.
     #[inline(always)]
     fn advance(&mut self) {
-        let mut texels = [[0u32; LANES]; 3];
-        let solid = edge_texels(self.table, &self.batch, &mut texels) & ((1u32 << self.batch_len) - 1);
+        let mut codes = [[0u32; LANES]; 3];
+        let solid = edge_codes(self.table, &self.batch, &mut codes) & ((1u32 << self.batch_len) - 1);
         let mut next = [NO_PENDING; LANES];
         let mut next_len = 0;
         let mut bits = solid;
         while bits != 0 {
             let i = bits.trailing_zeros() as usize;
             bits &= bits - 1;
-            let t = [0, 1, 2].map(|e| self.table.code(texels[e][i]));
+            let t = [0, 1, 2].map(|e| codes[e][i]);
             t.iter().for_each(|&t| self.table.prefetch_code(t));
             let corner = |k: usize| [self.batch[k][0][i], self.batch[k][1][i], self.batch[k][2][i]];
             next[next_len] = Pending { corners: [corner(0), corner(1), corner(2)], ids: self.batch_ids[i], tag: self.batch_tags[i], codes: t };
