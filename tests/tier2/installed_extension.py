@@ -63,7 +63,7 @@ def _install(zip_path: pathlib.Path) -> dict:
         if not pathlib.Path(module.__file__).is_relative_to(copy):
             raise pytest.UsageError(f"{module.__name__} was imported from {module.__file__}, not from {copy}")
     addon_utils.disable(MODULE, default_set=True)
-    return {"package": package, "blender": bpy.app.version_string, "wheels": wheels}
+    return {"package": package, "blender": bpy.app.version_string, "wheels": wheels, "user": user}
 
 
 @pytest.hookimpl(tryfirst=True)
@@ -94,6 +94,8 @@ def pytest_sessionfinish(session, exitstatus):
 def pytest_unconfigure(config):
     import bpy
 
+    # The temporary user folder (11 MB of wheels per run) goes with the session.
+    shutil.rmtree(config._hemishadow_installed[1]["user"], ignore_errors=True)
     if bpy.app.version < (5, 0):
         # The bpy module of 4.2 and 4.5 crashes at interpreter exit once a Python property
         # callback or CLI command was registered, even after unregistering (see
