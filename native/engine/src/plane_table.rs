@@ -33,8 +33,9 @@ pub struct PlaneTable {
     /// Every face, or only the positive ones (see `Mirrors`).
     masks: LargePageVec<Mask>,
     mirrors: Option<Mirrors>,
-    /// The disk's cells: a negative face's mask is its mirror's complement within it.
-    disk: Mask,
+    /// What a code's mask is XOR-ed with, by its `COMPLEMENT` bit: nothing, or the disk's
+    /// cells (a negative face's mask is its mirror's complement within the disk).
+    flips: [Mask; 2],
 }
 
 /// How a texel of the whole table (6 faces) maps onto a table of the positive faces only:
@@ -235,11 +236,11 @@ impl PlaneTable {
             let mut masks = LargePageVec::filled(Mask::EMPTY, texels / 2);
             fill_positive_faces(&cells, &mut masks, resolution);
             let mirrors = Some(Mirrors { face_shift: (resolution * resolution).trailing_zeros() });
-            return Ok(PlaneTable { resolution, masks, mirrors, disk });
+            return Ok(PlaneTable { resolution, masks, mirrors, flips: [Mask::EMPTY, disk] });
         }
         let mut masks = LargePageVec::filled(Mask::EMPTY, texels);
         fill_every_texel(&cells, &mut masks, 0, resolution);
-        Ok(PlaneTable { resolution, masks, mirrors: None, disk })
+        Ok(PlaneTable { resolution, masks, mirrors: None, flips: [Mask::EMPTY, disk] })
     }
 
     /// The shared table of a resolution, built on first use.
@@ -352,8 +353,8 @@ impl PlaneTable {
     #[inline(always)]
     pub fn mask_of_code(&self, code: u32) -> Mask {
         let stored = &self.masks[(code & !COMPLEMENT) as usize];
-        let complement = 0u64.wrapping_sub((code >> COMPLEMENT.trailing_zeros()) as u64);
-        Mask(std::array::from_fn(|w| stored.0[w] ^ (self.disk.0[w] & complement)))
+        let flip = &self.flips[(code >> COMPLEMENT.trailing_zeros()) as usize];
+        Mask(std::array::from_fn(|w| stored.0[w] ^ flip.0[w]))
     }
 }
 
