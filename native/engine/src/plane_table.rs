@@ -338,13 +338,14 @@ impl PlaneTable {
     #[inline(always)]
     pub fn prefetch_code(&self, code: u32) {
         #[cfg(target_arch = "x86_64")]
-        if let Some(mask) = self.masks.get((code & !COMPLEMENT) as usize) {
+        {
             use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
-            let p = mask as *const Mask as *const i8;
-            // SAFETY: prefetching is a hint and never faults; both lines lie inside the mask.
+            // No bounds check: the address is only a hint (a code's fetch checks it).
+            let p = self.masks.as_ptr().wrapping_add((code & !COMPLEMENT) as usize) as *const i8;
+            // SAFETY: prefetching is a hint and never faults, whatever the address.
             unsafe {
                 _mm_prefetch(p, _MM_HINT_T0);
-                _mm_prefetch(p.add(64), _MM_HINT_T0);
+                _mm_prefetch(p.wrapping_add(64), _MM_HINT_T0);
             }
         }
     }
