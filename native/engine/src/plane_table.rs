@@ -323,9 +323,9 @@ impl PlaneTable {
     }
 
     /// The code of a texel (`texel`) for `prefetch_code` and `mask_of_code`: where
-    /// its mask is stored, with `COMPLEMENT` set when it is the stored one's complement. The
-    /// pipelined loops work out the mirror once per triangle edge, not at its prefetch and
-    /// again at its fetch.
+    /// its mask is stored, with `COMPLEMENT` set when it is the stored one's complement. One
+    /// texel at a time (`mask_at`); the pipelined loops get their codes lane-parallel from
+    /// `codes`, equal to these.
     #[inline(always)]
     pub fn code(&self, texel: u32) -> u32 {
         let Some(mirrors) = self.mirrors else { return texel };
