@@ -30,32 +30,45 @@ pub const DEFAULT_RESOLUTION: usize = 128;
 
 pub struct PlaneTable {
     resolution: usize,
-    /// Every face, or only the positive ones (see `Mirrors`).
+    /// Every face, or only the positive ones (see `Codes`).
     masks: LargePageVec<Mask>,
-    mirrors: Option<Mirrors>,
+    codes: Codes,
     /// What a code's mask is XOR-ed with, by its `COMPLEMENT` bit: nothing, or the disk's
     /// cells (a negative face's mask is its mirror's complement within the disk).
     flips: [Mask; 2],
 }
 
-/// How a texel of the whole table (6 faces) maps onto a table of the positive faces only:
-/// texel (face 2a + 1, R - 1 - i, R - 1 - j) is the mirror of (2a, i, j). With F = R^2 a
-/// power of two, its index within the face is the mirror's XOR (F - 1).
+/// Where the mask of a texel (face 2a or 2a + 1 for axis a, index `within` its face of F =
+/// R^2 texels) is stored. Every face stored: at texel order. Only the positive faces (at
+/// power-of-two resolutions): texel (2a + 1, R - 1 - i, R - 1 - j) is the mirror of
+/// (2a, i, j), whose index within the face is the mirror's XOR (F - 1), and its mask the
+/// complement. One mapping for the lane-parallel `codes` and the single `code`.
 #[derive(Clone, Copy)]
-struct Mirrors {
-    /// log2 of a face's texel count.
-    face_shift: u32,
+struct Codes {
+    axis_stride: u32,
+    /// Added for a negative face (0 when it is mirrored onto the positive one).
+    negative_offset: u32,
+    /// XOR-ed into a negative face's index within its face.
+    flip: u32,
+    /// OR-ed into a negative face's code.
+    complement: u32,
 }
 
-impl Mirrors {
-    /// The stored index of `texel`, and all ones when its mask is the stored one's complement.
+impl Codes {
+    fn new(resolution: usize, mirrored: bool) -> Self {
+        let face = (resolution * resolution) as u32;
+        match mirrored {
+            true => Codes { axis_stride: face, negative_offset: 0, flip: face - 1, complement: COMPLEMENT },
+            false => Codes { axis_stride: 2 * face, negative_offset: face, flip: 0, complement: 0 },
+        }
+    }
+
+    /// The code of the texel `within` the face of `axis` (`negative`: all ones for the
+    /// negative face, else 0), written with selects so that it vectorises.
     #[inline(always)]
-    fn stored(self, texel: u32) -> (usize, u64) {
-        let face = texel >> self.face_shift;
-        let within = (1u32 << self.face_shift) - 1;
-        let negative = face & 1;
-        let index = ((face >> 1) << self.face_shift) | ((texel & within) ^ (within * negative));
-        (index as usize, 0u64.wrapping_sub(negative as u64))
+    fn of(self, axis: u32, negative: u32, within: u32) -> u32 {
+        (axis * self.axis_stride + (negative & self.negative_offset) + (within ^ (negative & self.flip)))
+            | (negative & self.complement)
     }
 }
 
@@ -235,12 +248,12 @@ impl PlaneTable {
             // texel's plane (tested at every power-of-two resolution up to 256).
             let mut masks = LargePageVec::filled(Mask::EMPTY, texels / 2);
             fill_positive_faces(&cells, &mut masks, resolution);
-            let mirrors = Some(Mirrors { face_shift: (resolution * resolution).trailing_zeros() });
-            return Ok(PlaneTable { resolution, masks, mirrors, flips: [Mask::EMPTY, disk] });
+            let codes = Codes::new(resolution, true);
+            return Ok(PlaneTable { resolution, masks, codes, flips: [Mask::EMPTY, disk] });
         }
         let mut masks = LargePageVec::filled(Mask::EMPTY, texels);
         fill_every_texel(&cells, &mut masks, 0, resolution);
-        Ok(PlaneTable { resolution, masks, mirrors: None, flips: [Mask::EMPTY, disk] })
+        Ok(PlaneTable { resolution, masks, codes: Codes::new(resolution, false), flips: [Mask::EMPTY, disk] })
     }
 
     /// The shared table of a resolution, built on first use.
@@ -286,13 +299,7 @@ impl PlaneTable {
         let resolution = self.resolution as u32;
         let half = 0.5 * self.resolution as f32;
         let last = (self.resolution - 1) as f32;
-        // With mirrors, a negative face's texel is the positive face's mirror (its index within
-        // the face XOR F - 1) and its mask the complement; without, it is stored after it.
-        let face = resolution * resolution;
-        let (axis_stride, negative_offset, flip, complement) = match self.mirrors {
-            Some(_) => (face, 0, face - 1, COMPLEMENT),
-            None => (2 * face, face, 0, 0),
-        };
+        let codes = self.codes;
         for i in 0..LANES {
             let (ax, ay, az) = (x[i].abs(), y[i].abs(), z[i].abs());
             let x_major = ax >= ay && ax >= az;
@@ -312,7 +319,7 @@ impl PlaneTable {
                 unsafe { w.to_int_unchecked::<u32>() }
             };
             let within = texel(v) * resolution + texel(u);
-            out[i] = (axis * axis_stride + (negative & negative_offset) + (within ^ (negative & flip))) | (negative & complement);
+            out[i] = codes.of(axis, negative, within);
         }
     }
 
@@ -328,9 +335,10 @@ impl PlaneTable {
     /// `codes`, equal to these.
     #[inline(always)]
     pub fn code(&self, texel: u32) -> u32 {
-        let Some(mirrors) = self.mirrors else { return texel };
-        let (index, complement) = mirrors.stored(texel);
-        index as u32 | (complement as u32 & COMPLEMENT)
+        let face_texels = (self.resolution * self.resolution) as u32;
+        let face = texel / face_texels;
+        let negative = 0u32.wrapping_sub(face & 1);
+        self.codes.of(face / 2, negative, texel % face_texels)
     }
 
     /// Asks the CPU to bring the mask of a code (`code`), two 64-byte lines, into cache ahead
