@@ -65,8 +65,8 @@ pub struct Quadrature {
     local_weights: Vec<f32>,
     /// Diffuse transfer of an unoccluded receiver in its own frame.
     local_open: [f32; MAX_COEFFS],
-    /// With one cell per block: `local_open` less every disk cell's weights (what a wholly
-    /// blocked receiver keeps: the quadrature's residual), and the disk's cells.
+    /// `local_open` less every block's weights (what a wholly blocked receiver keeps: the
+    /// quadrature's residual), and the disk's cells.
     local_closed: [f32; MAX_COEFFS],
     disk: Mask,
     col_masks: Vec<u64>,
@@ -119,12 +119,10 @@ impl Quadrature {
                 }
             }
         }
-        if block == 1 {
-            let k = quadrature.basis.coeffs();
-            for (i, closed) in quadrature.local_closed[..k].iter_mut().enumerate() {
-                let all: f64 = quadrature.local_weights.chunks_exact(k).map(|w| w[i] as f64).sum();
-                *closed = (local_open[i] as f64 - all) as f32;
-            }
+        let k = quadrature.basis.coeffs();
+        for (i, closed) in quadrature.local_closed[..k].iter_mut().enumerate() {
+            let all: f64 = quadrature.local_weights.chunks_exact(k).map(|w| w[i] as f64).sum();
+            *closed = (local_open[i] as f64 - all) as f32;
         }
         quadrature
     }
