@@ -103,12 +103,16 @@ def _loop_vectors(collection, size, count, attr="vector"):
 
 
 def read_mesh(obj, depsgraph, uv_name=None, albedo=False):
-    """The evaluated mesh of `obj` (local space) with its lightmap UVs and tangents per corner.
+    """The evaluated mesh of `obj` (local space) with its lightmap UVs and tangents per corner,
+    its vertices split where faces meet at sharp edges (`split_sharp_vertices`: bounce light is
+    carried per vertex).
 
     Tangents are Blender's MikkTSpace tangents of the active render UV map (the one normal
     maps use); None when the mesh cannot have them (no UV map, n-gons), and the engine falls
     back to per-triangle tangents. Raises ValueError naming the object when `uv_name` is
     asked for and missing. `albedo`: also the Base Color per vertex (lightmap_albedo)."""
+    from hemishadow.lightmap.geometry import split_sharp_vertices
+
     obj_eval = obj.evaluated_get(depsgraph)
     mesh = obj_eval.to_mesh()
     try:
@@ -132,7 +136,10 @@ def read_mesh(obj, depsgraph, uv_name=None, albedo=False):
             uv = _loop_vectors(layer.uv, 2, len(mesh.loops))[loops]
         tangents = _tangents(mesh, loops)
         colour = lightmap_albedo.base_color(obj, mesh) if albedo else None
-        return MeshData(vertices, triangles.reshape(m, 3), normals, uv, tangents, colour)
+        triangles, source = split_sharp_vertices(triangles.reshape(m, 3), normals)
+        if colour is not None and np.ndim(colour) == 2:
+            colour = colour[source]
+        return MeshData(vertices[source], triangles, normals, uv, tangents, colour)
     finally:
         obj_eval.to_mesh_clear()
 

@@ -106,7 +106,8 @@ def test_a_point_lamp_lights_the_bounce_surfaces():
     expected = (radiance / r2 ** 2 * (12 / 1200) ** 2).sum() / math.pi  # cos x cos / r^2 with both cos = 1 / r
     got = lit["cube"][0, 5, 0]
     assert abs(got / expected - 1) < 0.04, (got, expected)
-    assert np.allclose(lit["cube"][0, 4], direct["cube"][0, 4], rtol=1e-5)  # +Z sees the lamp, not the floor
+    # +Z sees the lamp, not the floor (which would add a few % of `got`); 1e-4: float rounding
+    assert np.allclose(lit["cube"][0, 4], direct["cube"][0, 4], rtol=1e-4)
 
 
 def test_bad_lamps_are_named():

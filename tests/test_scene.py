@@ -350,7 +350,17 @@ def test_bounce_weights_give_the_gather_under_any_radiance():
     normals = rng.normal(size=(300, 3))
     weights = scene.bounce_weights(points, normals)
     assert len(weights) == 300 and weights.entries > 300
-    np.testing.assert_array_equal(weights.masks, scene.visibility(points, normals))  # the same walk's masks
+    # The walk's masks are a radiance walk's, which draws proxies only where they are small
+    # in angle (`visibility` also where their error is small); with every triangle drawn
+    # they are `visibility`'s but for a rare cell where the ordered mode closes a pinhole
+    # the mask walk does not.
+    fine = world.engine(hemishadow)
+    fine.lod = 0.0
+    differ = np.unpackbits((fine.bounce_weights(points, normals).masks ^ fine.visibility(points, normals)).view(np.uint8))
+    assert differ.sum() <= 3, differ.sum()
+    coarse = scene.visibility(points, normals)
+    cells = np.unpackbits((weights.masks ^ coarse).view(np.uint8)).sum() / np.unpackbits(coarse.view(np.uint8)).sum()
+    assert cells < 0.01, cells  # the proxies' silhouettes
     counts = {m: len(world.meshes[m][0]) for m in range(len(world.meshes))}
     for trial in range(3):
         for m, n in counts.items():
@@ -385,7 +395,8 @@ def test_bounce_passes_agree_with_and_without_recorded_weights(monkeypatch):
     for m, (v, t) in enumerate(world.meshes):
         normals = np.tile([0.0, 0.0, 1.0], (len(v), 1)) if m == 0 else rng.normal(size=(len(v), 3))
         usable = rng.random(len(v)) > 0.1
-        receivers.append((m, v + 0.0, normals, usable, np.full((len(v), 3), 0.7), np.zeros((len(v), 3))))
+        receivers.append(bounce.BounceSurface(m, v + 0.0, normals, usable, np.full((len(v), 3), 0.7),
+                                              np.zeros((len(v), 3))))
         direct.append(rng.uniform(0, 1, (len(v), 3)).astype(np.float32))
     recorded = bounce.vertex_radiance(world.engine(hemishadow), receivers, direct, 3)
     monkeypatch.setattr(bounce, "MAX_WEIGHT_ENTRIES", 0)

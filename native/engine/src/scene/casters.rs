@@ -138,7 +138,7 @@ impl Casters<'_> {
         };
         let scene = self.scene;
         let top = scene.top.as_ref().expect("prepared by Scene::casters");
-        let walk = Walk { trees: &self.trees, positions: &self.positions, instances: &scene.instances, top, lod: scene.lod, exclude: skip, near_proxies: true };
+        let walk = Walk { trees: &self.trees, positions: &self.positions, instances: &scene.instances, top, lod: scene.lod, exclude: skip, near_proxies: true, radiance: false };
         let mut sink = MaskSink::knowing(table, self.full, known);
         walk.run(&world, scratch, &mut sink);
         sink.finish_raw()

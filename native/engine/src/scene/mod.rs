@@ -326,7 +326,7 @@ impl Scene {
 
     /// A walk over every instance of the prepared scene.
     fn scene_walk<'a>(&'a self, trees: &'a [&'a MeshTree], positions: &'a [&'a [Vec3]]) -> Walk<'a> {
-        Walk { trees, positions, instances: &self.instances, top: self.top.as_ref().expect("prepared"), lod: self.lod, exclude: &[], near_proxies: false }
+        Walk { trees, positions, instances: &self.instances, top: self.top.as_ref().expect("prepared"), lod: self.lod, exclude: &[], near_proxies: false, radiance: false }
     }
 
     fn walk_parts(&self) -> (Vec<&MeshTree>, Vec<&[Vec3]>) {
@@ -526,7 +526,7 @@ impl Scene {
         let offset = receivers::offset(offset, self.size())?;
         let table = PlaneTable::shared(self.table_resolution)?;
         let (trees, positions) = self.walk_parts();
-        let walk = self.scene_walk(&trees, &positions);
+        let walk = Walk { radiance: true, ..self.scene_walk(&trees, &positions) };
         let radiance = self.radiance_by_instance();
         let k = projector.coeffs();
         let full = disk();
@@ -563,7 +563,7 @@ impl Scene {
         let slots = *first_slot.last().expect("non-empty") as usize;
         let cell_weights = bounce_weights::normal_cell_weights();
         let (trees, positions) = self.walk_parts();
-        let walk = self.scene_walk(&trees, &positions);
+        let walk = Walk { radiance: true, ..self.scene_walk(&trees, &positions) };
         let black: Vec<Option<&[Rgb]>> = vec![None; self.instances.len()];
         let full = disk();
         let rows = par_collect(points.len(), progress, || bounce_weights::Scratch::new(slots), |r, scratch| {

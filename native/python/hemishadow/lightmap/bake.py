@@ -416,7 +416,7 @@ def vertex_bounce(scene, receivers, lighting, suns, lamps, bounces, offset, step
         return bounce.vertex_radiance(scene, receivers, [np.zeros((len(r[1]), 3), np.float32) for r in receivers], 0)
     record = bounce.VertexRecord(scene, receivers, offset, steps=steps)
     direct = []
-    for i, (_, pts, nrm, ok, _, _) in enumerate(receivers):
+    for i, (_, pts, nrm, ok, *_) in enumerate(receivers):
         d = np.zeros((len(pts), 3), np.float32)
         if ok.any():
             d[ok] = direct_light(scene, pts[ok], nrm[ok], nrm[ok][:, None], lighting, suns, np.zeros(ok.sum(), np.int64),
@@ -518,7 +518,7 @@ def emitters(targets, surfaces):
 
 
 def bounce_receivers(targets, surfaces):
-    """(mesh_id, points, normals, usable, albedo, emission) per distinct mesh."""
+    """A `bounce.BounceSurface` per distinct mesh."""
     seen, out = set(), []
     for surface in list(surfaces) + [t.surface for t in targets]:
         if surface.mesh_id in seen:
@@ -531,7 +531,8 @@ def bounce_receivers(targets, surfaces):
         nrm = nrm / np.where(usable, length, 1.0)[:, None]
         albedo = geometry.per_vertex(surface.albedo, len(pts), "albedo", label)
         emission = geometry.per_vertex(surface.emission, len(pts), "emission", label)
-        out.append((surface.mesh_id, pts, nrm, usable, albedo, emission))
+        out.append(bounce.BounceSurface(surface.mesh_id, pts, nrm, usable, albedo, emission,
+                                        np.asarray(surface.triangles, dtype=np.int64)))
     return out
 
 

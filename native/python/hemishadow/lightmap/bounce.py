@@ -8,12 +8,28 @@ receiver's geometric hemisphere; irradiance for a lobe direction v is sum A_l G_
 (A = pi, 2pi/3, pi/4), clamped at 0.
 """
 
+from typing import NamedTuple
+
 import numpy as np
 
 from .. import sh_basis
 
 _A = np.repeat([np.pi, 2 * np.pi / 3, np.pi / 4], [1, 3, 5]).astype(np.float32)
 BANDS = 3
+
+
+class BounceSurface(NamedTuple):
+    """A mesh whose vertices receive bounce light and pass it on (`bake.bounce_receivers`):
+    world `points` and unit `normals` (V, 3), `usable` (V,) the vertices with a normal,
+    `albedo` and `emission` (V, 3); `triangles` (M, 3) link vertices that cannot be lit
+    (inside solid geometry, no normal) to their neighbours (`fill`)."""
+    mesh_id: int
+    points: np.ndarray
+    normals: np.ndarray
+    usable: np.ndarray
+    albedo: np.ndarray
+    emission: np.ndarray
+    triangles: np.ndarray = None
 
 
 def lobe_irradiance(gathered, lobes):
@@ -28,13 +44,14 @@ def vertex_radiance(scene, receivers, direct, bounces, offset=None, progress=Non
     steps: a `bake.Steps` given a step per vertex and pass, in chunks short enough for a
     cancel to get through (else `progress` goes to the engine).
 
-    receivers: per surface (mesh_id, points (V, 3), normals (V, 3), usable (V,) bool, albedo
-    (V, 3), emission (V, 3)); direct: per surface, the direct irradiance / pi (V, 3) at its
-    vertices. record: their `VertexRecord`, made on the first pass with light to gather
-    when not given.
+    receivers: `BounceSurface`s; direct: per surface, the direct irradiance / pi (V, 3) at
+    its vertices. record: their `VertexRecord`, made on the first pass with light to gather
+    when not given. Vertices the record finds inside solid geometry, and those without a
+    normal, take their neighbours' radiance (`fill`): lit where they stand, they would pass
+    on the light of the other side of a wall (or the darkness inside it).
     """
-    radiance = [emission.astype(np.float32) for (_, _, _, _, _, emission) in receivers]
-    vertices = sum(int(r[3].sum()) for r in receivers)
+    radiance = [surface.emission.astype(np.float32) for surface in receivers]
+    vertices = sum(int(surface.usable.sum()) for surface in receivers)
     for _ in range(int(bounces)):
         _show(scene, receivers, radiance)
         gathered = None
@@ -45,12 +62,14 @@ def vertex_radiance(scene, receivers, direct, bounces, offset=None, progress=Non
         elif steps is not None:
             steps.step(vertices)
         new, first = [], 0
-        for (mesh_id, _, _, ok, albedo, emission), d in zip(receivers, direct):
+        for i, (surface, d) in enumerate(zip(receivers, direct)):
+            ok = surface.usable
             light = d.copy()
             if gathered is not None:
                 light[ok] += gathered[first:first + ok.sum()]
             first += ok.sum()
-            new.append((emission + albedo * light).astype(np.float32))
+            rgb = (surface.emission + surface.albedo * light).astype(np.float32)
+            new.append(rgb if record is None else fill(rgb, record.lit_of(i), surface.triangles))
         radiance = new
     _show(scene, receivers, radiance)
     return radiance
@@ -70,16 +89,26 @@ class VertexRecord:
 
     def __init__(self, scene, receivers, offset=None, progress=None, steps=None):
         self.scene, self.offset, self.progress, self.steps = scene, offset, progress, steps
-        self.counts = [int(r[3].sum()) for r in receivers]
-        self.points = np.concatenate([r[1][r[3]] for r in receivers]) if receivers else np.zeros((0, 3))
-        self.normals = np.concatenate([r[2][r[3]] for r in receivers]) if receivers else np.zeros((0, 3))
+        self.usable = [surface.usable for surface in receivers]
+        self.counts = [int(ok.sum()) for ok in self.usable]
+        self.points = np.concatenate([r.points[r.usable] for r in receivers]) if receivers else np.zeros((0, 3))
+        self.normals = np.concatenate([r.normals[r.usable] for r in receivers]) if receivers else np.zeros((0, 3))
         self.masks, self.weights = _record(scene, self.points, self.normals, offset, progress, steps)
+        self.valid = scene.valid(self.points, self.normals, offset=offset) if len(self.points) else np.zeros(0, bool)
         self._stepped = True
 
     def masks_of(self, surface):
         """The masks (V_usable, 16) of one surface's usable vertices."""
         first = sum(self.counts[:surface])
         return self.masks[first:first + self.counts[surface]]
+
+    def lit_of(self, surface):
+        """(V,) bool: the surface's vertices whose own light counts: usable and not inside
+        solid geometry (`Scene.valid`)."""
+        first = sum(self.counts[:surface])
+        lit = self.usable[surface].copy()
+        lit[lit] = self.valid[first:first + self.counts[surface]]
+        return lit
 
     def gathered(self):
         """Irradiance / pi (V_usable, 3) gathered along the normals under the radiance the
@@ -122,5 +151,27 @@ def _gathered(scene, points, normals, offset, progress, steps):
 
 
 def _show(scene, receivers, radiance):
-    for (mesh_id, *_), rgb in zip(receivers, radiance):
-        scene.set_radiance(mesh_id, rgb)
+    for surface, rgb in zip(receivers, radiance):
+        scene.set_radiance(surface.mesh_id, rgb)
+
+
+def fill(values, known, triangles):
+    """`values` (V, 3) with every vertex not `known` set to the mean of its neighbours (along
+    triangle edges) that are, growing out from the known ones a ring at a time, as texels
+    are filled (`dilate.fill`); vertices no known one reaches, and every vertex when
+    `triangles` is None, keep their values."""
+    if triangles is None or known.all():
+        return values
+    t = np.asarray(triangles, dtype=np.int64)
+    edges = np.stack([t[:, [0, 1, 2, 1, 2, 0]].ravel(), t[:, [1, 2, 0, 0, 1, 2]].ravel()], axis=1)
+    to, src = np.unique(edges, axis=0).T  # each neighbour once, however many triangles share the edge
+    out, known = values.copy(), known.copy()
+    while True:
+        edge = known[src] & ~known[to]
+        if not edge.any():
+            return out
+        count = np.bincount(to[edge], minlength=len(out))
+        sums = np.stack([np.bincount(to[edge], out[src[edge], c], minlength=len(out)) for c in range(3)], axis=1)
+        reached = count > 0
+        out[reached] = (sums[reached] / count[reached, None]).astype(out.dtype)
+        known |= reached

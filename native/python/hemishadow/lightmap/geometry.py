@@ -120,6 +120,20 @@ def target_corners(target):
     return pos, ng, normals, tangents, uv, tris
 
 
+def split_sharp_vertices(triangles, corner_normals):
+    """Triangles (M, 3) re-indexed so that corners of one vertex with different shading
+    normals (sharp edges, flat shading) become vertices of their own, and per new vertex the
+    index of the vertex it copies (V',): bounce light is carried per vertex, and a box's corner
+    shared by its faces would pass the light of one face on to the others (the bottom of a
+    cabinet standing on a floor sees the sky under the floor and lit the cabinet's sides).
+    Corners with bit-equal normals stay one vertex, as Blender gives a smooth fan's corners."""
+    tris = np.asarray(triangles, dtype=np.int64)
+    normals = np.asarray(corner_normals, dtype=np.float32).reshape(-1, 3) + np.float32(0.0)  # -0.0 -> 0.0
+    keys = np.concatenate([tris.reshape(-1, 1), normals.view(np.int32).astype(np.int64)], axis=1)
+    unique, inverse = np.unique(keys, axis=0, return_inverse=True)
+    return inverse.reshape(tris.shape), unique[:, 0]
+
+
 #: Vertex receivers move this fraction of the way towards the mean centroid of their
 #: triangles: a vertex where a floor meets a wall would otherwise see half its hemisphere
 #: through the junction (outside the room) and pass on half the light.

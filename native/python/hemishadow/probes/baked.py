@@ -45,7 +45,7 @@ def radiance(receivers, lightmaps):
     """{mesh_id: outgoing radiance (V, 3)} of the bounce receivers (`bounce_receivers`) that
     have a lightmap in `lightmaps` ({mesh_id: irradiance / pi at its vertices (V, 3)})."""
     out = {}
-    for mesh_id, pts, _, _, albedo, emission in receivers:
+    for mesh_id, pts, _, _, albedo, emission, _ in receivers:
         if not lightmaps or mesh_id not in lightmaps:
             continue
         light = geometry.finite(lightmaps[mesh_id], f"lightmap light of mesh {mesh_id}", (len(pts), 3))
