@@ -171,7 +171,9 @@ impl MeshTree {
         split(&centroids, &mut order, 0, &mut nodes, &mut leaf_ranges, &mut ranges);
         let leaves: Vec<Compact> =
             leaf_ranges.iter().map(|&(s, e)| Compact::new(order[s..e].iter().map(|&t| triangles[t as usize]))).collect();
-        let subtree = |n: usize| order[ranges[n].0..ranges[n].1].iter().map(|&t| triangles[t as usize]).collect::<Vec<_>>();
+        // Proxies are simplified over welded positions (`welded`), leaves keep the mesh's ids.
+        let by_position: Vec<[u32; 3]> = welded(positions, triangles).collect();
+        let subtree = |n: usize| order[ranges[n].0..ranges[n].1].iter().map(|&t| by_position[t as usize]).collect::<Vec<_>>();
         let (proxies, proxy_error): (Vec<Compact>, Vec<f32>) = (0..nodes.len())
             .into_par_iter()
             .map(|n| {
@@ -366,7 +368,7 @@ pub fn simplify(positions: &[Vec3], triangles: &[[u32; 3]], target: usize) -> (V
     if triangles.len() <= target {
         return (triangles.to_vec(), 0.0);
     }
-    let compact = Compact::new(welded(positions, triangles));
+    let compact = Compact::new(triangles.iter().copied());
     let local: Vec<Vec3> = compact.vertices.iter().map(|&v| positions[v as usize]).collect();
     let indices: Vec<u32> = compact.triangles.iter().flatten().copied().collect();
     let mut error = 0.0f32;
