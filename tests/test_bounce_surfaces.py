@@ -7,7 +7,7 @@ import pytest
 
 hemishadow = pytest.importorskip("hemishadow")
 from hemishadow.lightmap import bounce  # noqa: E402
-from hemishadow.lightmap.geometry import split_sharp_vertices  # noqa: E402
+from hemishadow.lightmap.geometry import split_sharp_vertices, subdivided, subdivision_levels  # noqa: E402
 
 
 def cube():
@@ -93,3 +93,41 @@ def test_a_vertex_inside_a_wall_takes_its_neighbours_light():
     # Lit where they stand they would see the glowing inside all round: 0.5 x (1 + 10).
     assert np.all(radiance[inside] <= radiance[beside].max() + 1e-6)
     assert np.all(radiance[inside] >= radiance[beside].min() - 1e-6)
+
+
+def test_subdivision_keeps_the_surface_and_its_interpolation():
+    """Each split puts 4 triangles in place of 1 over the same area, shares midpoints between
+    neighbours (a closed cube stays closed: V - E + F = 2), and interpolates per-corner and
+    per-vertex values linearly: any point of a parent triangle gets the same value from its
+    child as from the parent."""
+    v, t = cube()
+    corner = np.random.default_rng(1).normal(size=(len(t), 3, 2))
+    colour = np.random.default_rng(2).uniform(size=(len(v), 3))
+    v2, t2, (c2,), (col2,) = subdivided(v, t, 2, [corner], [colour])
+    assert t2.shape == (16 * len(t), 3)
+    area = lambda p, q: np.linalg.norm(np.cross(p[q[:, 1]] - p[q[:, 0]], p[q[:, 2]] - p[q[:, 0]]), axis=1).sum()
+    assert area(v2, t2) == pytest.approx(area(v.astype(float), t))
+    edges = np.unique(np.sort(t2[:, [[0, 1], [1, 2], [2, 0]]].reshape(-1, 2), axis=1), axis=0)
+    assert len(v2) - len(edges) + len(t2) == 2
+    # Child k of parent p is row 16 p + k: its corners' values are the parent's, interpolated
+    # at the corners' barycentric coordinates in the parent.
+    for p in range(len(t)):
+        a, b, c = v[t[p]].astype(float)
+        m = np.stack([b - a, c - a], axis=1)
+        for k in range(16):
+            for j in range(3):
+                x = v2[t2[16 * p + k, j]]
+                beta, gamma = np.linalg.lstsq(m, x - a, rcond=None)[0]
+                w = np.array([1 - beta - gamma, beta, gamma])
+                np.testing.assert_allclose(c2[16 * p + k, j], w @ corner[p], atol=1e-12)
+                np.testing.assert_allclose(col2[t2[16 * p + k, j]], w @ colour[t[p]], atol=1e-12)
+    assert subdivided(v, t, 1, [], [np.array([0.8, 0.8, 0.8])])[3][0].shape == (3,)  # a constant stays
+
+
+def test_subdivision_levels_follow_the_longest_edge_within_a_budget():
+    v, t = cube()
+    assert subdivision_levels(v, t, 2.0) == 0
+    assert subdivision_levels(v, t, 0.5) == 2  # the faces' diagonals, sqrt 2, need two halvings
+    assert subdivision_levels(v * 10, t, 0.5) == 5
+    assert subdivision_levels(v * 10, t, 0.5, max_triangles=12 * 4 ** 3) == 3
+    assert subdivision_levels(v, t, 0.0) == 0 and subdivision_levels(v, t[:0], 0.5) == 0

@@ -134,6 +134,54 @@ def split_sharp_vertices(triangles, corner_normals):
     return inverse.reshape(tris.shape), unique[:, 0]
 
 
+def subdivided(vertices, triangles, levels, corner_values=(), vertex_values=()):
+    """The mesh with every triangle split into 4 at its edges' midpoints, `levels` times:
+    vertices (V', 3), triangles (M 4^levels, 3), each array of `corner_values` ((M, 3, ...):
+    per triangle corner) and of `vertex_values` ((V, ...); a (3,) colour is left as it is)
+    interpolated linearly, so that interpolating across a sub-triangle gives what it gave
+    across its parent (UVs, shading normals, tangents: the same texels). Bounce light is
+    carried per vertex: a room's walls of a few large triangles carried a sun patch, or a
+    lamp's pool of light, by their corners only. Midpoints are made once per edge (vertex
+    ids, so a mesh split at sharp edges stays split), and shared edges get one."""
+    v = np.asarray(vertices, dtype=np.float64)
+    t = np.asarray(triangles, dtype=np.int64)
+    corners = [np.asarray(c) for c in corner_values]
+    per_vertex = [np.asarray(a, dtype=np.float64) if np.ndim(a) == 2 else a for a in vertex_values]
+    for _ in range(int(levels)):
+        edges = np.sort(t[:, [[0, 1], [1, 2], [2, 0]]].reshape(-1, 2), axis=1)
+        unique, inverse = np.unique(edges, axis=0, return_inverse=True)
+        mid = len(v) + inverse.reshape(-1, 3)  # midpoint ids of edges ab, bc, ca
+        v = np.concatenate([v, v[unique].mean(axis=1)])
+        per_vertex = [np.concatenate([a, a[unique].mean(axis=1)]) if np.ndim(a) == 2 else a for a in per_vertex]
+        a, b, c = t.T
+        ab, bc, ca = mid.T
+        t = np.stack([np.stack([a, ab, ca], 1), np.stack([ab, b, bc], 1), np.stack([ca, bc, c], 1),
+                      np.stack([ab, bc, ca], 1)], axis=1).reshape(-1, 3)
+        corners = [_split_corners(c) for c in corners]
+    return v, t, corners, per_vertex
+
+
+def _split_corners(values):
+    """Per-corner values of each triangle's four children (`subdivided`'s order)."""
+    a, b, c = values[:, 0], values[:, 1], values[:, 2]
+    ab, bc, ca = (a + b) / 2, (b + c) / 2, (c + a) / 2
+    children = [np.stack(x, axis=1) for x in ((a, ab, ca), (ab, b, bc), (ca, bc, c), (ab, bc, ca))]
+    return np.stack(children, axis=1).reshape((-1,) + values.shape[1:]).astype(values.dtype)
+
+
+def subdivision_levels(world_vertices, triangles, max_edge, max_triangles=200_000):
+    """How many times `subdivided` must split a mesh for its longest edge (world units) to
+    be at most `max_edge`, within `max_triangles` (0 when it already is)."""
+    if not len(triangles) or not max_edge > 0:
+        return 0
+    p = np.asarray(world_vertices, dtype=np.float64)[np.asarray(triangles, dtype=np.int64)]
+    longest = np.linalg.norm(p - np.roll(p, 1, axis=1), axis=2).max()
+    levels = int(np.ceil(np.log2(longest / max_edge))) if longest > max_edge else 0
+    while levels and len(triangles) * 4 ** levels > max_triangles:
+        levels -= 1
+    return levels
+
+
 #: Vertex receivers move this fraction of the way towards the mean centroid of their
 #: triangles: a vertex where a floor meets a wall would otherwise see half its hemisphere
 #: through the junction (outside the room) and pass on half the light.
