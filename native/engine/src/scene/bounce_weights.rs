@@ -82,16 +82,20 @@ pub type Row = (Vec<u32>, Vec<f32>);
 /// One receiver's row: the weight of every vertex its covered cells see.
 pub fn row(sink: &DepthSink, cell_weights: &[f32], first_slot: &[u32], scratch: &mut Scratch) -> Row {
     let Scratch { sums, seen, touched, .. } = scratch;
+    let mut sources = [(0, 0.0); 4];
     for (cell, &cell_weight) in cell_weights.iter().enumerate() {
-        let Some(Hit { instance, ids, weights }) = sink.hit(cell) else { continue };
-        let base = first_slot[instance as usize];
-        for (id, b) in ids.iter().zip(weights) {
-            let slot = (base + id) as usize;
-            if !seen[slot] {
-                seen[slot] = true;
-                touched.push(slot as u32);
+        let count = sink.sources(cell, &mut sources);
+        for &(source, share) in &sources[..count] {
+            let Some(Hit { instance, ids, weights }) = sink.hit(source) else { continue };
+            let base = first_slot[instance as usize];
+            for (id, b) in ids.iter().zip(weights) {
+                let slot = (base + id) as usize;
+                if !seen[slot] {
+                    seen[slot] = true;
+                    touched.push(slot as u32);
+                }
+                sums[slot] += cell_weight * share * b;
             }
-            sums[slot] += cell_weight * b;
         }
     }
     touched.sort_unstable();

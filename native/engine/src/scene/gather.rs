@@ -68,10 +68,10 @@ impl Projector {
         let k = self.coeffs();
         let mut local = [[0.0f32; MAX_COEFFS]; 3];
         for cell in 0..MASK_CELLS {
-            if !sink.depth[cell].is_finite() {
+            let rgb = sink.colour[cell]; // a pinhole shows its neighbours' light (`DepthSink::sources`)
+            if rgb == [0.0; 3] {
                 continue;
             }
-            let rgb = sink.colour[cell];
             let w = self.cell_weights(cell);
             for ch in 0..3 {
                 if rgb[ch] != 0.0 {

@@ -130,6 +130,38 @@ impl<'a> DepthSink<'a> {
         Some(Hit { instance: w.instance, ids: w.ids, weights: barycentric(q, w.e1, w.e2, w.normal, w.nn) })
     }
 
+    /// The cells whose nearest blockers show their light in `cell`, with their shares; returns
+    /// how many of `out` it set. A cell whose nearest blocker faces the receiver shows its own.
+    /// A back face, or nothing, in a cell whose neighbours (left, right, up, down) show front
+    /// faces all round, is a pinhole between two triangles of a surface (the plane table's
+    /// cells on a shared edge can fall to neither): the cell shows its front neighbours'
+    /// light. It showed the inside of the solid behind, lit as the other side of the wall: a
+    /// room lit through its window by the sky alone gathered 1.6x Cycles' bounce light on its
+    /// floor. Other back faces (the inside of a solid, a sheet seen from behind) show none.
+    pub fn sources(&self, cell: usize, out: &mut [(usize, f32); 4]) -> usize {
+        let covered = self.depth[cell].is_finite();
+        if covered && !self.back.get(cell / MASK_SIDE, cell % MASK_SIDE) {
+            out[0] = (cell, 1.0);
+            return 1;
+        }
+        let (row, col) = ((cell / MASK_SIDE) as i32, (cell % MASK_SIDE) as i32);
+        let mut count = 0;
+        for (dr, dc) in [(0, -1), (0, 1), (-1, 0), (1, 0)] {
+            let (r, c) = (row + dr, col + dc);
+            if !(0..MASK_SIDE as i32).contains(&r) || !(0..MASK_SIDE as i32).contains(&c) || cell_direction(r as usize, c as usize).is_none() {
+                continue; // off the disk
+            }
+            let n = r as usize * MASK_SIDE + c as usize;
+            if !self.depth[n].is_finite() || self.back.get(r as usize, c as usize) {
+                return 0; // not a pinhole
+            }
+            out[count] = (n, 0.0);
+            count += 1;
+        }
+        out[..count].iter_mut().for_each(|s| s.1 = 1.0 / count as f32);
+        count
+    }
+
     /// Cells some blocker covers.
     pub fn covered(&self) -> Mask {
         let mut mask = Mask::EMPTY;
@@ -244,19 +276,22 @@ impl DepthSink<'_> {
 
     /// Colour of every covered cell from its winner, once the walk is over: the radiance
     /// interpolated barycentrically at the cell's direction on its nearest blocker (black when
-    /// that blocker's instance shows none).
+    /// that blocker's instance shows none); pinholes show their neighbours' (`sources`).
     fn resolve(&mut self) {
         if !self.keeps_winners || self.radiance.iter().all(Option::is_none) {
             return; // colours stay black
         }
+        let mut sources = [(0, 0.0); 4];
         for cell in 0..MASK_CELLS {
-            if !self.depth[cell].is_finite() {
-                continue;
+            let count = self.sources(cell, &mut sources);
+            let mut colour = [0.0f32; 3];
+            for &(source, share) in &sources[..count] {
+                let Some(r) = self.radiance[self.winners[self.winner[source] as usize].instance as usize] else { continue };
+                let Hit { ids, weights, .. } = self.hit(source).expect("a covered cell with its winner kept");
+                let [ra, rb, rc] = ids.map(|v| r[v as usize]);
+                (0..3).for_each(|k| colour[k] += share * (weights[0] * ra[k] + weights[1] * rb[k] + weights[2] * rc[k]));
             }
-            let Some(r) = self.radiance[self.winners[self.winner[cell] as usize].instance as usize] else { continue };
-            let Hit { ids, weights, .. } = self.hit(cell).expect("a covered cell with its winner kept");
-            let [ra, rb, rc] = ids.map(|v| r[v as usize]);
-            self.colour[cell] = [0, 1, 2].map(|k| weights[0] * ra[k] + weights[1] * rb[k] + weights[2] * rc[k]);
+            self.colour[cell] = colour;
         }
     }
 }
@@ -288,8 +323,9 @@ mod tests {
         let t = table();
         let radiance: Vec<Rgb> = vec![[1.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, 0.0, 1.0], [0.0, 0.0, 1.0]];
         let meshes = [Some(radiance.as_slice())];
-        let near = ([-5.0, -5.0, 1.0], [5.0, -5.0, 1.0], [0.0, 5.0, 1.0]);
-        let far = ([-50.0, -50.0, 2.0], [50.0, -50.0, 2.0], [0.0, 50.0, 2.0]);
+        // Wound to face the receiver below (a back face shows no light).
+        let near = ([-5.0, -5.0, 1.0], [0.0, 5.0, 1.0], [5.0, -5.0, 1.0]);
+        let far = ([-50.0, -50.0, 2.0], [0.0, 50.0, 2.0], [50.0, -50.0, 2.0]);
         for near_first in [true, false] {
             let mut sink = DepthSink::new(&t, &meshes);
             let order = if near_first { [(near, [0, 1, 2]), (far, [3, 4, 5])] } else { [(far, [3, 4, 5]), (near, [0, 1, 2])] };
@@ -310,14 +346,30 @@ mod tests {
         let meshes = [None, Some(glow.as_slice())];
         let mut sink = DepthSink::new(&t, &meshes);
         let far = Tag { mesh: 1, instance: 1, facing: 1.0 };
-        sink.triangle([-50.0, -50.0, 2.0], [50.0, -50.0, 2.0], [0.0, 50.0, 2.0], [0, 1, 2], far);
-        sink.triangle([-5.0, -5.0, 1.0], [5.0, -5.0, 1.0], [0.0, 5.0, 1.0], [0, 1, 2], TAG);
+        sink.triangle([-50.0, -50.0, 2.0], [0.0, 50.0, 2.0], [50.0, -50.0, 2.0], [0, 1, 2], far);
+        sink.triangle([-5.0, -5.0, 1.0], [0.0, 5.0, 1.0], [5.0, -5.0, 1.0], [0, 1, 2], TAG);
         sink.flush();
         let zenith = 16 * MASK_SIDE + 16;
         assert!((sink.depth[zenith] - 1.0).abs() < 0.01);
         assert_eq!(sink.colour[zenith], [0.0; 3]); // black, not the farther glow
         let rim = (0..MASK_CELLS).find(|&c| sink.depth[c] > 1.5 && sink.depth[c].is_finite()).expect("a cell sees the far one");
         assert_eq!(sink.colour[rim], [1.0; 3]);
+    }
+
+    #[test]
+    fn a_back_face_shows_no_light() {
+        let t = table();
+        let glow: Vec<Rgb> = vec![[1.0, 1.0, 1.0]; 3];
+        let meshes = [Some(glow.as_slice())];
+        for (b, c, lit) in [([0.0, 5.0, 1.0], [5.0, -5.0, 1.0], true), ([5.0, -5.0, 1.0], [0.0, 5.0, 1.0], false)] {
+            let mut sink = DepthSink::new(&t, &meshes);
+            sink.triangle([-5.0, -5.0, 1.0], b, c, [0, 1, 2], TAG);
+            sink.flush();
+            let zenith = 16 * MASK_SIDE + 16;
+            assert!((sink.depth[zenith] - 1.0).abs() < 0.01); // seen either way: it blocks
+            assert_eq!(sink.colour[zenith], if lit { [1.0; 3] } else { [0.0; 3] });
+            assert_eq!(sink.sources(zenith, &mut [(0, 0.0); 4]), lit as usize);
+        }
     }
 
     #[test]

@@ -143,7 +143,8 @@ fn bad_ids_and_shapes_are_errors() {
 fn gather_inside_a_glowing_box_sees_it_all_around() {
     let mut scene = Scene::new();
     let (v, t) = cube();
-    let id = scene.add_mesh(&v, &t).unwrap();
+    let inward: Vec<[u32; 3]> = t.iter().map(|&[a, b, c]| [a, c, b]).collect(); // a room: its faces turn inwards
+    let id = scene.add_mesh(&v, &inward).unwrap();
     scene.add_instance(id, &IDENTITY).unwrap();
     scene.set_radiance(id, &vec![[1.0, 0.5, 0.0]; v.len()]).unwrap();
     let g = scene.gather(&[[0.1, 0.0, -0.1]], None, 3, None, &mut |_| true).unwrap();
