@@ -6,6 +6,7 @@ texels brighter than 1 % of the open-sky value, and both times.
     PYTHONPATH=native/python .venv/bin/python bench/lightmap_cycles.py [--resolution 32]
         [--samples 1024] [--bounces 0] [--no-sun] [--cuts N] [--map flat|b0|b1|b2]
         [--scene floor|room|corner] [--lamp none|point|spot|area] [--sweep 16,64,256] [--uniform]
+        [--picture PNG]
 
 --scene room: a closed 4 x 4 x 2.5 m room with a window in its +X wall, a table and a cabinet
 (sky and sun come in through the window); corner: a ground with two walls meeting at a corner
@@ -206,6 +207,21 @@ def errors(ours, reference, covered, footprint=None):
     return relative, covered & bright, covered & clear
 
 
+def picture(path, reference, ours, relative, covered):
+    """Cycles' map and ours side by side at one exposure (the reference's 99th percentile is
+    white, sRGB), then the relative error (black 0, white 10 % or more), each texel 4 px."""
+    from hemishadow.lightmap.encode import write_png
+
+    white = np.percentile(reference[covered], 99)
+    srgb = lambda x: np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(np.maximum(x, 0.0031308), 1 / 2.4) - 0.055)
+    shown = [srgb(np.clip(m / white, 0.0, 1.0)) for m in (reference, ours)]
+    shown.append(np.repeat(np.clip(np.where(covered, relative, 0.0) / 0.10, 0.0, 1.0)[..., None], 3, axis=2))
+    gap = np.ones((reference.shape[0], 2, 3))
+    rgb = np.concatenate([shown[0], gap, shown[1], gap, shown[2]], axis=1).repeat(4, axis=0).repeat(4, axis=1)
+    rgba = np.concatenate([rgb, np.ones(rgb.shape[:2] + (1,))], axis=2)
+    write_png(path, (rgba * 255 + 0.5).astype(np.uint8))
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--resolution", type=int, default=32)
@@ -220,6 +236,7 @@ def main(argv=None):
     parser.add_argument("--ours-samples", type=int, default=4, help="our supersamples per texel")
     parser.add_argument("--uniform", action="store_true", help="ours with every sample in every texel (not adaptive)")
     parser.add_argument("--sweep", default="", help="Cycles sample counts to time against ours, e.g. 16,64,256")
+    parser.add_argument("--picture", default="", help="PNG: Cycles' map, ours, and the relative error (0-10 %%)")
     args = parser.parse_args(argv)
     vector = None if args.map == "flat" else lm.HL2[int(args.map[1])]
     scene, floor, material = build(not args.no_sun, args.cuts, vector, args.scene, args.lamp,
@@ -243,6 +260,8 @@ def main(argv=None):
         print(f"  {label}: mean {100 * error.mean():.2f} %, median {100 * np.median(error):.2f} %, "
               f"worst {100 * error.max():.1f} % over {keep.sum()} texels")
     ours_error = relative[clear].mean()
+    if args.picture:
+        picture(args.picture, reference, ours[args.map], relative, covered)
     for samples in [int(x) for x in args.sweep.split(",") if x]:
         image, seconds = cycles_bake(scene, floor, material, args.resolution, samples, args.bounces, 2)
         rel = errors(image, reference, covered, footprint)[0][clear].mean()
