@@ -94,7 +94,7 @@ class VertexRecord:
         self.points = np.concatenate([r.points[r.usable] for r in receivers]) if receivers else np.zeros((0, 3))
         self.normals = np.concatenate([r.normals[r.usable] for r in receivers]) if receivers else np.zeros((0, 3))
         self.masks, self.weights = _record(scene, self.points, self.normals, offset, progress, steps)
-        self.valid = scene.valid(self.points, self.normals, offset=offset) if len(self.points) else np.zeros(0, bool)
+        self.valid = _valid(scene, self.points, self.normals, offset, steps)
         self._stepped = True
 
     def masks_of(self, surface):
@@ -134,6 +134,16 @@ def _record(scene, points, normals, offset, progress, steps):
             if entries > MAX_WEIGHT_ENTRIES:
                 weights = None  # freed: past the budget, passes gather anew
     return masks, weights
+
+
+def _valid(scene, points, normals, offset, steps):
+    """`Scene.valid` (V,) in chunks a cancel gets through (they report no progress)."""
+    valid = np.zeros(len(points), bool)
+    if not len(points):
+        return valid
+    for s in [slice(0, len(points))] if steps is None else steps.chunks(len(points), weight=0, least=1024):
+        valid[s] = scene.valid(points[s], normals[s], offset=offset)
+    return valid
 
 
 def _slices(count, steps):
