@@ -171,18 +171,18 @@ impl MeshTree {
         split(&centroids, &mut order, 0, &mut nodes, &mut leaf_ranges, &mut ranges);
         let leaves: Vec<Compact> =
             leaf_ranges.iter().map(|&(s, e)| Compact::new(order[s..e].iter().map(|&t| triangles[t as usize]))).collect();
-        // Proxies are simplified over welded positions (`welded`), leaves keep the mesh's ids.
-        let by_position: Vec<[u32; 3]> = welded(positions, triangles).collect();
+        // Proxies are simplified over welded positions (`SplitCopies::welded`), leaves keep the
+        // mesh's ids.
+        let copies = SplitCopies::new(positions, triangles);
+        let by_position = copies.as_ref().map_or_else(|| triangles.to_vec(), |c| c.welded(positions, triangles));
         let subtree = |n: usize| order[ranges[n].0..ranges[n].1].iter().map(|&t| by_position[t as usize]).collect::<Vec<_>>();
-        let (proxies, proxy_error): (Vec<Compact>, Vec<f32>) = (0..nodes.len())
+        let (mut proxies, proxy_error): (Vec<Compact>, Vec<f32>) = (0..nodes.len())
             .into_par_iter()
             .map(|n| {
                 let (tris, error) = simplify(positions, &subtree(n), PROXY_TRIANGLES);
                 (Compact::new(tris.into_iter()), error)
             })
             .unzip();
-        let copies = SplitCopies::new(positions, triangles);
-        let mut proxies = proxies;
         if let Some(copies) = &copies {
             proxies.par_iter_mut().for_each(|p| copies.choose(positions, p));
         }
@@ -399,8 +399,15 @@ pub fn simplify(positions: &[Vec3], triangles: &[[u32; 3]], target: usize) -> (V
     (result, error)
 }
 
-/// The vertices of a mesh that repeats positions (split at sharp edges or seams), by position,
-/// with their area-weighted normals at rest.
+/// The vertices of a mesh that repeats positions (split at sharp edges or seams), by position
+/// in the order the triangles first use them, with their unit area-weighted normals at rest.
+///
+/// Meshes split at sharp edges or UV seams (flat shading, most imported files) repeat a
+/// position under several ids: to the simplifier those edges are borders, which stop the
+/// reduction or, left free, shrink apart, and each copy's proxy normal (`pushed_out`) moves it
+/// its own way; both opened cracks in closed rooms (a room of boxes split at every edge let the
+/// sky onto the floor through their proxies: 7 % fewer blocked cells). Positions are compared
+/// exactly (-0.0 as 0.0), as a split copies them.
 struct SplitCopies {
     by_position: std::collections::HashMap<[u32; 3], Vec<u32>>,
     normals: Vec<Vec3>,
@@ -422,7 +429,13 @@ impl SplitCopies {
                 }
             }
         }
+        let normals = normals.into_iter().map(|n| crate::mesh::normalize(n).unwrap_or([0.0; 3])).collect();
         by_position.values().any(|c| c.len() > 1).then_some(SplitCopies { by_position, normals })
+    }
+
+    /// The triangles with every vertex replaced by the first copy of its position.
+    fn welded(&self, positions: &[Vec3], triangles: &[[u32; 3]]) -> Vec<[u32; 3]> {
+        triangles.iter().map(|t| t.map(|v| self.by_position[&position_key(positions[v as usize])][0])).collect()
     }
 
     /// Sets `compact.shown`: per corner, the copy of its position whose normal is closest to
@@ -437,7 +450,7 @@ impl SplitCopies {
                 let n = crate::rasterizer::cross(crate::mesh::sub(b, a), crate::mesh::sub(c, a));
                 ids.map(|v| {
                     let copies = &self.by_position[&position_key(positions[v as usize])];
-                    let facing = |w: &u32| crate::rasterizer::dot(n, crate::mesh::normalize(self.normals[*w as usize]).unwrap_or([0.0; 3]));
+                    let facing = |w: &u32| crate::rasterizer::dot(n, self.normals[*w as usize]);
                     *copies.iter().max_by(|x, y| facing(x).total_cmp(&facing(y))).unwrap_or(&v)
                 })
             })
@@ -448,20 +461,6 @@ impl SplitCopies {
 /// A position as a hash key: its bits, -0.0 as 0.0.
 fn position_key(p: Vec3) -> [u32; 3] {
     p.map(|x| (x + 0.0).to_bits())
-}
-
-/// The triangles with every vertex replaced by the first one at the same position. Meshes
-/// split at sharp edges or UV seams (flat shading, most imported files) repeat a position under
-/// several ids: to the simplifier those edges are borders, which stop the reduction or, left
-/// free, shrink apart, and each copy's proxy normal (`pushed_out`) moves it its own way; both
-/// opened cracks in closed rooms (a room of boxes split at every edge let the sky onto the
-/// floor through their proxies: 7 % fewer blocked cells). Positions are compared exactly
-/// (-0.0 as 0.0), as a split copies them.
-fn welded<'a>(positions: &'a [Vec3], triangles: &'a [[u32; 3]]) -> impl Iterator<Item = [u32; 3]> + 'a {
-    let mut first = std::collections::HashMap::new();
-    triangles.iter().map(move |t| {
-        t.map(|v| *first.entry(position_key(positions[v as usize])).or_insert(v))
-    })
 }
 
 #[cfg(test)]

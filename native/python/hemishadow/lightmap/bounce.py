@@ -97,17 +97,20 @@ class VertexRecord:
         self.valid = _valid(scene, self.points, self.normals, offset, steps)
         self._stepped = True
 
+    def _usable_span(self, surface):
+        """Where one surface's usable vertices lie in `points`, `masks` and `valid`."""
+        first = sum(self.counts[:surface])
+        return slice(first, first + self.counts[surface])
+
     def masks_of(self, surface):
         """The masks (V_usable, 16) of one surface's usable vertices."""
-        first = sum(self.counts[:surface])
-        return self.masks[first:first + self.counts[surface]]
+        return self.masks[self._usable_span(surface)]
 
     def lit_of(self, surface):
         """(V,) bool: the surface's vertices whose own light counts: usable and not inside
         solid geometry (`Scene.valid`)."""
-        first = sum(self.counts[:surface])
         lit = self.usable[surface].copy()
-        lit[lit] = self.valid[first:first + self.counts[surface]]
+        lit[lit] = self.valid[self._usable_span(surface)]
         return lit
 
     def gathered(self):
