@@ -36,6 +36,7 @@ class MeshData:
     uv: np.ndarray | None
     tangents: np.ndarray | None
     albedo: np.ndarray | None = None
+    blocker: tuple | None = None  # (vertices, triangles) before `subdivided`, when it split the mesh
 
 
 def make_lightmap_uv(obj, name=DEFAULT_UV, method="LIGHTMAP", margin=0.05):
@@ -130,7 +131,8 @@ def read_mesh(obj, depsgraph, uv_name=None, albedo=False, max_edge=None):
     back to per-triangle tangents. Raises ValueError naming the object when `uv_name` is
     asked for and missing. `albedo`: also the Base Color per vertex (lightmap_albedo).
     `max_edge`: triangles are split (`subdivided`) until no edge is longer (world units), for
-    bounce light, which is carried per vertex."""
+    bounce light, which is carried per vertex; `blocker` keeps the triangles as they were
+    (the same surface, for visibility: a mask walk over the split mesh costs 3-4x more)."""
     from hemishadow.lightmap.geometry import split_sharp_vertices, subdivided, subdivision_levels
 
     obj_eval = obj.evaluated_get(depsgraph)
@@ -162,13 +164,15 @@ def read_mesh(obj, depsgraph, uv_name=None, albedo=False, max_edge=None):
             colour = colour[source]
         matrix = np.array(obj_eval.matrix_world, np.float64)
         levels = subdivision_levels(vertices @ matrix[:3, :3].T + matrix[:3, 3], triangles, max_edge or 0.0)
+        blocker = None
         if levels:
+            blocker = (vertices, triangles)
             given = [a for a in (normals, uv, tangents) if a is not None]
             vertices, triangles, corners, (colour,) = subdivided(vertices, triangles, levels, given, [colour])
             corners = iter(corners)
             normals, uv, tangents = (None if a is None else next(corners) for a in (normals, uv, tangents))
             vertices = vertices.astype(np.float32)
-        return MeshData(vertices, triangles, normals, uv, tangents, colour)
+        return MeshData(vertices, triangles, normals, uv, tangents, colour, blocker)
     finally:
         obj_eval.to_mesh_clear()
 
@@ -342,6 +346,7 @@ class Prepared:
     resolutions: list
     options: dict
     atlas: str | None = None  # the atlas's name when the targets share one map
+    bounce_scene: object = None  # the subdivided meshes that carry bounce light (None: engine_scene's)
 
 
 LAYOUTS = ("ATLAS", "OBJECT")
@@ -411,15 +416,17 @@ def prepare(scene, objects, *, uv_name=DEFAULT_UV, resolution=256, texel_density
     baked = {o.name for o in objects}
     meshes = sorted(set(blockers(scene)) | set(objects), key=lambda o: (o.name not in baked, o.name))
     max_edge = bounce_edge(meshes, depsgraph) if bounces else None
+    bounce_scene = hemishadow.Scene() if max_edge else None  # gets every mesh in the same order: same ids
     for obj in meshes:
         data = read_mesh(obj, depsgraph, uv_name if obj.name in baked else None, albedo=True, max_edge=max_edge)
         if not len(data.triangles):
             if obj.name in baked:
                 raise ValueError(f"{obj.name}: the mesh has no faces")
             continue
-        mesh_id = engine_scene.add_mesh(data.vertices, data.triangles.astype(np.uint32))
         matrix = np.array(obj.evaluated_get(depsgraph).matrix_world, np.float64)
-        engine_scene.add_instance(mesh_id, matrix)
+        mesh_id = _add_mesh(engine_scene, *(data.blocker or (data.vertices, data.triangles)), matrix)
+        if bounce_scene is not None:
+            _add_mesh(bounce_scene, data.vertices, data.triangles, matrix)
         surface = lm.Surface(mesh_id, data.vertices, data.triangles, matrix, data.albedo, emission_of(obj), obj.name)
         surfaces[obj.name] = surface
         if obj.name in baked:
@@ -433,7 +440,13 @@ def prepare(scene, objects, *, uv_name=DEFAULT_UV, resolution=256, texel_density
     return Prepared(engine_scene, targets, others, lighting_of(scene), suns_of(scene), resolutions,
                     dict(bounces=bounces, samples=samples, adaptive=adaptive, margin=margin, basis=basis,
                          lamps=lamps_of(scene),
-                         atlas=atlas is not None), atlas)
+                         atlas=atlas is not None), atlas, bounce_scene)
+
+
+def _add_mesh(engine_scene, vertices, triangles, matrix):
+    mesh_id = engine_scene.add_mesh(vertices, triangles.astype(np.uint32))
+    engine_scene.add_instance(mesh_id, matrix)
+    return mesh_id
 
 
 def baked_names(targets):
@@ -452,6 +465,7 @@ def compute(prepared, progress=None):
 
     return lm.bake(prepared.engine_scene, prepared.targets, resolution=prepared.resolutions,
                    lighting=prepared.lighting, suns=prepared.suns, surfaces=prepared.surfaces, progress=progress,
+                   bounce_scene=prepared.bounce_scene,
                    **prepared.options)
 
 

@@ -101,3 +101,21 @@ def test_contrast_must_be_positive():
     for bad in (0, -0.1, float("nan")):
         with pytest.raises(ValueError, match="contrast"):
             bake(scene, [Target(Surface(plane, v, t), uv)], resolution=8, lighting=uniform_sky(), contrast=bad)
+
+
+def test_departures_within_least_never_refine():
+    """A closed room's AO: a few cells of window, swinging by up to `AO_CELLS` cells from texel
+    to texel (the mask's resolution) refines nothing; one cell more does."""
+    from hemishadow.lightmap import cells
+
+    cell = cells.largest_cell_ao()
+    least = np.array([refine.AO_CELLS * cell])
+    swings = np.where((np.add.outer(np.arange(12), np.arange(12)) % 2) == 0, 0.0, 0.999 * least[0])
+    ao = 0.01 + swings
+    assert refine.texels_to_refine(*field(ao))[0][interior(12)].all()  # without `least`: all of them
+    assert not refine.texels_to_refine(*field(ao), full=np.array([1.0]), least=least)[0][interior(12)].any()
+    ao[6, 6] += 2.1 * least[0]  # departs from its neighbours' mean by 1.1 x least
+    refined = refine.texels_to_refine(*field(ao), full=np.array([1.0]), least=least)[0]
+    assert refined[6, 6] and refined[interior(12)].sum() == 1 + 4
+    assert refined[5, 5] and refined[7, 7] and refined[5, 7] and refined[7, 5]  # their diagonal means rise 1.05 x least
+    assert 1 / 810 < cell < 1 / 790

@@ -361,6 +361,10 @@ def test_bounce_weights_give_the_gather_under_any_radiance():
     coarse = scene.visibility(points, normals)
     cells = np.unpackbits((weights.masks ^ coarse).view(np.uint8)).sum() / np.unpackbits(coarse.view(np.uint8)).sum()
     assert cells < 0.01, cells  # the proxies' silhouettes
+    # Validity from the same walk is `valid`'s (a few receivers lie inside the cow).
+    inside = ~fine.valid(points, normals)
+    assert inside.any() and np.array_equal(fine.bounce_weights(points, normals).valid, ~inside)
+    np.testing.assert_array_equal(weights.valid, scene.valid(points, normals))
     counts = {m: len(world.meshes[m][0]) for m in range(len(world.meshes))}
     for trial in range(3):
         for m, n in counts.items():
@@ -515,3 +519,19 @@ def test_irradiance_is_transfer_under_the_lighting():
     for bad in (np.zeros((8, 3)), np.zeros((9, 2)), np.full((9, 3), np.nan)):
         with pytest.raises(ValueError):
             scene.irradiance(points, normals, bad)
+
+
+def test_gather_views_distance_is_the_harmonic_mean_distance():
+    """Irradiance caching's R: under a ceiling at height h, 1/d = cos(theta) / h averaged with
+    the cosine weight gives 2 / (3 h), so R = 1.5 h (the ceiling, 400 wide, leaves out a
+    sliver at the horizon); nothing seen: inf."""
+    scene = hemishadow.Scene()
+    v, t = grid(200.0, 9, z=1.0, facing_down=True)
+    scene.add_instance(scene.add_mesh(v, t), np.eye(4))
+    points = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 0.5]])
+    views = scene.gather_views(points, np.tile([0.0, 0.0, 1.0], (2, 1)), bands=1, offset=0.0)
+    assert views.distance.shape == (1, 2)
+    np.testing.assert_allclose(views.distance[0], [1.5, 0.75], rtol=0.02)
+    empty = hemishadow.Scene()
+    empty.add_instance(empty.add_mesh(v, t), np.eye(4))
+    assert np.isinf(empty.gather_views(points, np.tile([0.0, 0.0, -1.0], (2, 1)), bands=1).distance).all()

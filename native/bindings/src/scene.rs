@@ -40,6 +40,12 @@ impl PyBounceWeights {
     fn masks<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<u64>> {
         packed_masks(py, &self.inner.masks)
     }
+
+    /// Whether each receiver is outside solid geometry (P,) bool, as `Scene.valid` decides it.
+    #[getter]
+    fn valid<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<bool>> {
+        self.inner.valid.clone().into_pyarray(py)
+    }
 }
 
 /// Masks as (P, 16) uint64 rows, bit r * 32 + c set when cell (r, c) is blocked.
@@ -270,7 +276,8 @@ impl PyScene {
         Ok(Array1::from_vec(hit).into_pyarray(py))
     }
 
-    /// `gather`, with each walked hemisphere's mask (P, H, 16) and back-face fraction (P, H).
+    /// `gather`, with each walked hemisphere's mask (P, H, 16), back-face fraction (P, H) and
+    /// harmonic mean distance (P, H).
     #[pyo3(signature = (points, normals, bands, offset, progress=None))]
     #[allow(clippy::type_complexity)]
     fn gather_views<'py>(
@@ -281,7 +288,7 @@ impl PyScene {
         bands: usize,
         offset: Option<f32>,
         progress: Option<Py<PyAny>>,
-    ) -> PyResult<(Bound<'py, PyArray3<f32>>, Bound<'py, PyArray3<u64>>, Bound<'py, PyArray2<f32>>)> {
+    ) -> PyResult<(Bound<'py, PyArray3<f32>>, Bound<'py, PyArray3<u64>>, Bound<'py, PyArray2<f32>>, Bound<'py, PyArray2<f32>>)> {
         let p = rows3(&points, "points")?;
         let n = normals.map(|n| rows3(&n, "normals")).transpose()?;
         let hemispheres = if n.is_some() { 1 } else { 2 };
@@ -291,12 +298,16 @@ impl PyScene {
         let result = run(py, || inner.gather_views(&p, n.as_deref(), bands, offset, &mut |f| report.report(f)));
         let (values, views) = reporter.finish(result)?;
         let words = engine::disk_mask::MASK_WORDS;
-        let masks: Vec<u64> = views.iter().flat_map(|(m, _)| m.0).collect();
-        let back: Vec<f32> = views.iter().map(|(_, b)| *b).collect();
+        let masks: Vec<u64> = views.iter().flat_map(|v| v.mask.0).collect();
+        let per_view = |f: fn(&engine::scene::HemisphereView) -> f32| {
+            let values: Vec<f32> = views.iter().map(f).collect();
+            Array2::from_shape_vec((p.len(), hemispheres), values).expect("P x H").into_pyarray(py)
+        };
         Ok((
             Array3::from_shape_vec((p.len(), bands * bands, 3), values).expect("P x k x 3").into_pyarray(py),
             Array3::from_shape_vec((p.len(), hemispheres, words), masks).expect("P x H x words").into_pyarray(py),
-            Array2::from_shape_vec((p.len(), hemispheres), back).expect("P x H").into_pyarray(py),
+            per_view(|v| v.back),
+            per_view(|v| v.distance),
         ))
     }
 

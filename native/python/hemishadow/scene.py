@@ -5,6 +5,7 @@ mesh vertices; see `Scene`.
 """
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
@@ -216,23 +217,27 @@ class Scene:
 
     def gather_views(self, points, normals=None, *, bands=3, offset=None, progress=None):
         """`gather`, with what the same walks say of each hemisphere walked (the normal's, or
-        +Z then -Z without normals, H = 1 or 2): (SH (P, bands^2, 3), masks (H, P, 16) uint64
-        as `visibility` gives them, back (H, P) float32: the fraction of the disk's cells whose
-        nearest blocker shows its back, which `valid` allows up to one half). Probes take
-        their masks and validity from their gather's walks."""
+        +Z then -Z without normals, H = 1 or 2): a `GatherViews` of the SH (P, bands^2, 3),
+        masks (H, P, 16) uint64 as `visibility` gives them, back (H, P) float32: the fraction
+        of the disk's cells whose nearest blocker shows its back, which `valid` allows up to
+        one half, and distance (H, P) float32: the harmonic mean distance to what the cells
+        see, cosine-weighted, a cell seeing nothing counting as infinitely far (irradiance
+        caching's R; inf where nothing is seen). Probes take their masks and validity from
+        their gather's walks; lightmaps interpolate bounce light where the distance is large."""
         pts = _checks.points(points, "points")
         norms = None if normals is None else _normals(normals, len(pts))
-        sh, masks, back = self._native.gather_views(pts, norms, _checks.band_count(bands), _checks.offset(offset),
-                                                    _checks.progress(progress))
-        return sh, np.ascontiguousarray(masks.transpose(1, 0, 2)), np.ascontiguousarray(back.T)
+        sh, masks, back, distance = self._native.gather_views(pts, norms, _checks.band_count(bands),
+                                                              _checks.offset(offset), _checks.progress(progress))
+        return GatherViews(sh, np.ascontiguousarray(masks.transpose(1, 0, 2)), np.ascontiguousarray(back.T),
+                           np.ascontiguousarray(distance.T))
 
     def bounce_weights(self, points, normals, *, offset=None, progress=None):
         """Records, per receiver, the weight of every vertex it sees in `gather`'s ordered mode,
         so that bounce passes, which change only the radiance, need no walk through the scene:
         `BounceWeights.irradiance()` then equals `gather(points, normals, bands=3)` evaluated
         along each normal (irradiance / pi, clamped at 0; `lightmap.bounce.lobe_irradiance`)
-        under whatever radiance the scene shows at that time, and `BounceWeights.masks`, the
-        receivers' `visibility` masks from the same walk. Once the scene's geometry or
+        under whatever radiance the scene shows at that time; `BounceWeights.masks` and
+        `.valid` are the receivers' `visibility` masks and validity from the same walk. Once the scene's geometry or
         instances change, `irradiance()` raises ValueError (what the receivers see may have
         changed)."""
         pts, norms = self._receivers(points, normals)
@@ -255,6 +260,14 @@ class Scene:
         return int(mesh_id)
 
 
+class GatherViews(NamedTuple):
+    """`Scene.gather_views`' results."""
+    sh: np.ndarray
+    masks: np.ndarray
+    back: np.ndarray
+    distance: np.ndarray
+
+
 class BounceWeights:
     """Receivers' recorded gather weights (`Scene.bounce_weights`)."""
 
@@ -275,6 +288,12 @@ class BounceWeights:
         """The receivers' raw visibility masks (P, 16) uint64 from the same walk, as
         `Scene.visibility` gives them."""
         return self._native.masks
+
+    @property
+    def valid(self):
+        """(P,) bool: whether each receiver is outside solid geometry, from the same walk, as
+        `Scene.valid` decides it."""
+        return self._native.valid
 
     def irradiance(self):
         """Irradiance / pi float32 (P, 3) along each receiver's normal, gathered from the

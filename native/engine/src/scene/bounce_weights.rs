@@ -22,6 +22,9 @@ pub struct BounceWeights {
     /// Each receiver's visibility mask from the same walk (covered cells, pinholes closed),
     /// the one `Scene::visibility` gives: the bounce surfaces' direct light needs it too.
     pub masks: Vec<Mask>,
+    /// Whether each receiver is outside solid geometry, as `Scene::valid` decides it, from
+    /// the same walk (`receivers::is_valid` of its back faces).
+    pub valid: Vec<bool>,
     rows: Vec<usize>,
     slots: Vec<u32>,
     weights: Vec<f32>,
@@ -106,8 +109,15 @@ pub fn row(sink: &DepthSink, cell_weights: &[f32], first_slot: &[u32], scratch: 
 
 impl BounceWeights {
     /// From each receiver's mask and row (`row`).
-    pub fn new(receivers: Vec<(Mask, Row)>, first_slot: Vec<u32>, stamps: Vec<u64>) -> Self {
-        let (masks, rows): (Vec<Mask>, Vec<Row>) = receivers.into_iter().unzip();
+    pub fn new(receivers: Vec<(Mask, bool, Row)>, first_slot: Vec<u32>, stamps: Vec<u64>) -> Self {
+        let mut masks = Vec::with_capacity(receivers.len());
+        let mut valid = Vec::with_capacity(receivers.len());
+        let mut rows = Vec::with_capacity(receivers.len());
+        for (mask, ok, row) in receivers {
+            masks.push(mask);
+            valid.push(ok);
+            rows.push(row);
+        }
         let mut offsets = Vec::with_capacity(rows.len() + 1);
         offsets.push(0);
         let total = rows.iter().map(|r| r.0.len()).sum();
@@ -117,7 +127,7 @@ impl BounceWeights {
             weights.extend(w);
             offsets.push(slots.len());
         }
-        BounceWeights { masks, rows: offsets, slots, weights, first_slot, stamps }
+        BounceWeights { masks, valid, rows: offsets, slots, weights, first_slot, stamps }
     }
 
     pub fn receivers(&self) -> usize {
@@ -174,7 +184,7 @@ mod tests {
     fn apply_weighs_each_instances_vertices() {
         let first = first_slots([2usize, 1].into_iter()).unwrap();
         let rows = vec![(vec![0, 2], vec![0.5, 0.25]), (vec![], vec![]), (vec![1], vec![2.0])];
-        let w = BounceWeights::new(rows.into_iter().map(|r| (Mask::EMPTY, r)).collect(), first, vec![7, 8]);
+        let w = BounceWeights::new(rows.into_iter().map(|r| (Mask::EMPTY, true, r)).collect(), first, vec![7, 8]);
         let a: Vec<Rgb> = vec![[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]];
         let b: Vec<Rgb> = vec![[8.0, 8.0, 8.0]];
         let out = w.apply(&[Some(&a), Some(&b)], &[7, 8]).unwrap();

@@ -554,7 +554,8 @@ impl Scene {
 
     /// What `gather` (3 bands) then the lobe along each normal would give, recorded as weights
     /// on the vertices each receiver sees (`bounce_weights`), for bounce passes that change
-    /// only the radiance, with the receivers' `visibility` masks from the same walk.
+    /// only the radiance, with the receivers' `visibility` masks and validity (`valid`) from
+    /// the same walk.
     pub fn bounce_weights(&mut self, points: &[Vec3], normals: &[Vec3], offset: Option<f32>, progress: Progress) -> Result<BounceWeights> {
         receivers::check(points, Some(normals))?;
         let offset = receivers::offset(offset, self.size())?;
@@ -570,7 +571,8 @@ impl Scene {
             let receiver = receivers::receiver(points[r], normals[r], offset);
             let mut sink = DepthSink::recording(&table, &black);
             walk.run(&receiver, &mut scratch.stack, &mut sink);
-            (closed_mask(&sink, &full), bounce_weights::row(&sink, cell_weights, &first_slot, scratch))
+            let row = bounce_weights::row(&sink, cell_weights, &first_slot, scratch);
+            (closed_mask(&sink, &full), receivers::is_valid(&sink.back), row)
         })?;
         Ok(BounceWeights::new(rows, first_slot, self.stamps.clone()))
     }
@@ -582,13 +584,31 @@ impl Scene {
     }
 }
 
-/// What a receiver's depth buffer says of its hemisphere: the visibility mask (covered
-/// cells, pinholes closed as `visibility` closes them) and the fraction of its cells that
-/// show back faces (`valid` when at most receivers::BACK_FACE_LIMIT).
-pub type HemisphereView = (Mask, f32);
+/// What a receiver's depth buffer says of its hemisphere.
+#[derive(Clone, Copy, Debug)]
+pub struct HemisphereView {
+    /// The visibility mask: covered cells, pinholes closed as `visibility` closes them.
+    pub mask: Mask,
+    /// The fraction of its cells that show back faces (`valid` when at most
+    /// receivers::BACK_FACE_LIMIT).
+    pub back: f32,
+    /// The harmonic mean distance to what its cells see, a cell seeing nothing counting as
+    /// infinitely far (irradiance caching's R: the cells are equal areas of the projected
+    /// disk, so the mean is cosine-weighted); infinite when it sees nothing.
+    pub distance: f32,
+}
 
 fn hemisphere_view(sink: &DepthSink, full: &Mask) -> HemisphereView {
-    (closed_mask(sink, full), receivers::back_fraction(&sink.back))
+    HemisphereView { mask: closed_mask(sink, full), back: receivers::back_fraction(&sink.back), distance: harmonic_distance(sink) }
+}
+
+/// The disk's area over the sum of each seen cell's area / its depth (rim cells count for
+/// the part of the disk they hold: equal weights would overweigh the horizon).
+fn harmonic_distance(sink: &DepthSink) -> f32 {
+    let samples = crate::disk_mask::cell_samples();
+    let near: f32 = sink.depth.iter().zip(samples).filter(|(t, _)| t.is_finite()).map(|(t, s)| s.area / t.max(f32::MIN_POSITIVE)).sum();
+    let disk: f32 = samples.iter().map(|s| s.area).sum();
+    disk / near
 }
 
 /// The cells the depth buffer covers, pinholes closed as `visibility` closes them.

@@ -303,7 +303,8 @@ def _lightmaps(unit):
     setup = time.perf_counter() - t0
     t1 = time.perf_counter()
     maps = lm.bake(prepared.engine_scene, [prepared.targets[k]], resolution=[prepared.resolutions[k]],
-                   lighting=prepared.lighting, suns=prepared.suns, surfaces=surfaces, **prepared.options)[0]
+                   lighting=prepared.lighting, suns=prepared.suns, surfaces=surfaces, bounce_scene=prepared.bounce_scene,
+                   **prepared.options)[0]
     return dict(object=unit["object"], maps=maps, warnings=[str(w.message) for w in caught],
                 seconds=dict(setup=setup, work=time.perf_counter() - t1))
 

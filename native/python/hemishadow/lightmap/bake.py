@@ -18,7 +18,7 @@ import numpy as np
 from .. import Cancelled
 from . import basis as frames
 from . import atlas as atlases
-from . import bounce, cells, dilate, geometry, lamps as lamp_models, light, seams, texels
+from . import bounce, cells, dilate, geometry, lamps as lamp_models, light, seams, sparse_gather, texels
 from . import refine as refinement
 from .geometry import Surface, Target
 
@@ -212,7 +212,7 @@ def _texel_maps(texel, resolution, values, valid):
 
 def bake(scene, targets, *, resolution, lighting=None, suns=(), lamps=(), surfaces=(), bounces=2, samples=4, margin=2,
          basis="hl2", offset=None, stitch_seams=True, adaptive=True, contrast=refinement.CONTRAST, adaptive_suns=False,
-         lamp_points=16, atlas=False, progress=None):
+         lamp_points=16, atlas=False, bounce_scene=None, progress=None):
     """Bakes lightmaps of `targets` (`Target`s) in `scene` (a `hemishadow.Scene` holding every
     blocker); returns one dict of maps per target (see the module docstring), or with
     atlas=True a list of one dict: the map all targets share (`atlas.py`).
@@ -242,6 +242,9 @@ def bake(scene, targets, *, resolution, lighting=None, suns=(), lamps=(), surfac
     adaptive_suns: with adaptive=False, a sun ray per texel first, then per sample where
         neighbours disagree (`_sun_lit`: an edge between two texels' first rays is missed);
         False (the default): a ray per sample. stitch_seams: match texels across UV seams.
+    bounce_scene: a `hemishadow.Scene` of the same surfaces, mesh for mesh (same ids), with
+        more vertices to carry bounce light (the add-on subdivides long edges); None: `scene`.
+        `scene` then serves direct light only: its coarser meshes make those walks cheaper.
     progress: None or a callable taking the fraction done; returning False raises
         `hemishadow.Cancelled` and nothing is returned.
     """
@@ -274,8 +277,10 @@ def bake(scene, targets, *, resolution, lighting=None, suns=(), lamps=(), surfac
         centres = _Samples.of([_sample_geometry(tg, r, 1, setup.check) for tg, r in zip(targets, sizes)], sizes,
                               atlas, basis)
     cells.moments(setup.check)  # cached: computed once per process
-    scene.prepare()  # the engine's scene build (once per scene; it cannot be interrupted)
-    setup.check()
+    bounce_scene = scene if bounce_scene is None else bounce_scene
+    for built in {id(scene): scene, id(bounce_scene): bounce_scene}.values():
+        built.prepare()  # the engine's scene build (once per scene; it cannot be interrupted)
+        setup.check()
 
     receivers = bounce_receivers(targets, surfaces) if (bounces or emitters(targets, surfaces)) else []
     vertex_count = sum(len(r[1]) for r in receivers)
@@ -289,8 +294,7 @@ def bake(scene, targets, *, resolution, lighting=None, suns=(), lamps=(), surfac
     else:
         lit = _refined(scene, centres, full, offs, contrast, steps, light_args)
     if receivers:
-        gathered = _indirect(scene, receivers, lit.points, lit.ng, lit.valid, lit.cell, lighting, suns, lamps,
-                             bounces, offset, steps)
+        gathered = _indirect(bounce_scene, receivers, lit, lighting, suns, lamps, bounces, offset, steps)
         if gathered is not None:
             for s in steps.chunks(len(lit.points), weight=0):
                 lit.maps[s] += bounce.lobe_irradiance(gathered[s], lit.lobes[s])
@@ -384,8 +388,9 @@ def _refined(scene, centres, full, offsets, contrast, steps, light_args):
     usable = np.zeros(cells_count, bool)
     usable[centres.cell] = centres.covered & lit.valid
     full_value = np.r_[np.full(values.shape[1] - 1, np.nan), 1.0]  # the light: its brightest texel (NaN); AO: 1
+    least = np.r_[np.zeros(values.shape[1] - 1), refinement.AO_CELLS * cells.largest_cell_ao()]
     refine = refinement.texels_to_refine(values.reshape(centres.shape + (-1,)), usable.reshape(centres.shape),
-                                         contrast, full_value).reshape(-1)
+                                         contrast, full_value, least).reshape(-1)
     more = refine[full.cell]
     steps.step(2 * int((~more).sum()))  # the samples of texels that keep their centre's light
     if not more.any():
@@ -426,17 +431,26 @@ def vertex_bounce(scene, receivers, lighting, suns, lamps, bounces, offset, step
     return bounce.vertex_radiance(scene, receivers, direct, bounces, offset, steps=steps, record=record)
 
 
-def _indirect(scene, receivers, points, ng, valid, texel_id, lighting, suns, lamps, bounces, offset, steps):
-    """Gathered SH (P, 9, 3) of the light the samples receive from the surfaces after
-    `bounces` passes, gathered once per texel; None when every surface is black."""
+def _indirect(scene, receivers, lit, lighting, suns, lamps, bounces, offset, steps):
+    """Gathered SH (P, 9, 3) of the light the samples `lit` (`_Samples` with their direct
+    light) receive from the surfaces after `bounces` passes, once per texel, and at every
+    other texel where it is smooth against the texel's whole light (`sparse_gather`); None
+    when every surface is black."""
     radiance = vertex_bounce(scene, receivers, lighting, suns, lamps, bounces, offset, steps)
     if not any(r.any() for r in radiance):
-        steps.step(len(points))
+        steps.step(len(lit.points))
         return None
-    rep, of_sample = _representatives(texel_id, valid)
-    out = np.empty((len(rep), bounce.BANDS ** 2, 3), np.float32)
-    for s in steps.chunks(len(rep), weight=len(points) / max(len(rep), 1), least=1024):
-        out[s] = scene.gather(points[rep[s]], ng[rep[s]], bands=bounce.BANDS, offset=offset)
+    rep, of_sample = _representatives(lit.cell, lit.valid)
+    points, ng = lit.points[rep], lit.ng[rep]
+    direct = lit.maps[rep, 0] / bounce.FLAT_PER_BAND0  # the flat map's light in band-0 units
+
+    def gather_at(i):
+        views = scene.gather_views(points[i], ng[i], bands=bounce.BANDS, offset=offset)
+        return views.sh, views.distance[0]
+
+    out = sparse_gather.gather(gather_at,
+                               bounce.BANDS ** 2, points, ng, lit.valid[rep], lit.cell[rep], lit.shape, steps,
+                               weight=len(lit.points) / max(len(rep), 1), floor=direct)
     return out[of_sample]
 
 

@@ -16,6 +16,7 @@ from .. import sh_basis
 
 _A = np.repeat([np.pi, 2 * np.pi / 3, np.pi / 4], [1, 3, 5]).astype(np.float32)
 BANDS = 3
+FLAT_PER_BAND0 = float(_A[0] * sh_basis(np.array([[0.0, 0.0, 1.0]]), 1)[0, 0] / np.pi)  # a band-0 coefficient's flat light
 
 
 class BounceSurface(NamedTuple):
@@ -81,8 +82,8 @@ MAX_WEIGHT_ENTRIES = 1 << 27
 
 class VertexRecord:
     """The bounce surfaces' usable vertices and what one walk each sees from them
-    (`Scene.bounce_weights`): their visibility masks, for their direct light, and their
-    gather weights. Which surface a vertex sees in each direction is the same in every
+    (`Scene.bounce_weights`): their visibility masks, for their direct light, whether they
+    are inside solid geometry, and their gather weights. Which surface a vertex sees in each direction is the same in every
     pass, so every pass reuses the weights instead of walking the scene again; past
     MAX_WEIGHT_ENTRIES they are dropped and each pass gathers anew. Recording steps
     `steps` once per vertex, the first pass's share."""
@@ -93,8 +94,7 @@ class VertexRecord:
         self.counts = [int(ok.sum()) for ok in self.usable]
         self.points = np.concatenate([r.points[r.usable] for r in receivers]) if receivers else np.zeros((0, 3))
         self.normals = np.concatenate([r.normals[r.usable] for r in receivers]) if receivers else np.zeros((0, 3))
-        self.masks, self.weights = _record(scene, self.points, self.normals, offset, progress, steps)
-        self.valid = _valid(scene, self.points, self.normals, offset, steps)
+        self.masks, self.valid, self.weights = _record(scene, self.points, self.normals, offset, progress, steps)
         self._stepped = True
 
     def _usable_span(self, surface):
@@ -125,28 +125,20 @@ class VertexRecord:
 
 
 def _record(scene, points, normals, offset, progress, steps):
-    """Masks (V, 16) and `Scene.bounce_weights` per chunk (None past MAX_WEIGHT_ENTRIES)."""
+    """Masks (V, 16), validity (V,) and `Scene.bounce_weights` per chunk (None past
+    MAX_WEIGHT_ENTRIES)."""
     masks = np.zeros((len(points), 16), np.uint64)
+    valid = np.zeros(len(points), bool)
     weights, entries = [], 0
     for s in _slices(len(points), steps):
         w = scene.bounce_weights(points[s], normals[s], offset=offset, progress=progress if steps is None else None)
-        masks[s] = w.masks
+        masks[s], valid[s] = w.masks, w.valid
         entries += w.entries
         if weights is not None:
             weights.append(w)
             if entries > MAX_WEIGHT_ENTRIES:
                 weights = None  # freed: past the budget, passes gather anew
-    return masks, weights
-
-
-def _valid(scene, points, normals, offset, steps):
-    """`Scene.valid` (V,) in chunks a cancel gets through (they report no progress)."""
-    valid = np.zeros(len(points), bool)
-    if not len(points):
-        return valid
-    for s in [slice(0, len(points))] if steps is None else steps.chunks(len(points), weight=0, least=1024):
-        valid[s] = scene.valid(points[s], normals[s], offset=offset)
-    return valid
+    return masks, valid, weights
 
 
 def _slices(count, steps):

@@ -112,6 +112,12 @@ def radiance_directions():
     return d
 
 
+def largest_cell_ao():
+    """The most one cell adds to ambient occlusion (1 = open): its share of the cosine-weighted
+    hemisphere, about 1/800 (a 32 x 32 grid's cell's share of the unit disk)."""
+    return float(moments()[:, 2].max() / np.pi)
+
+
 def open_clamped_cosine(cos_angle):
     """Integral of max(0, v.s) over the hemisphere of n, for unit v at cos_angle = v.n."""
     return np.pi * (1.0 + np.clip(cos_angle, -1.0, 1.0)) / 2.0

@@ -94,7 +94,7 @@ def views(scene, points, offset=None, bands=None, sides=True):
     sphere of the radiance the scene's surfaces show (`Scene.gather`), else None. +Z and -Z
     come from the gather's ordered walks (`Scene.gather_views`), the four sides from plain
     mask walks (`Scene.visibility`)."""
-    sh, z_masks, back = scene.gather_views(points, None, bands=bands or 1, offset=offset)
+    sh, z_masks, back, _ = scene.gather_views(points, None, bands=bands or 1, offset=offset)
     if not sides:
         return Views(z_masks, back, None)
     masks = np.empty((6, len(points), 16), np.uint64)
