@@ -129,8 +129,8 @@ def test_a_texel_across_a_seam_from_its_neighbours_gathers():
 
 def test_bake_matches_gathering_at_every_texel(monkeypatch):
     """A wall on a plane under a sky, a sun and its bounce: the bake with sparse gathers
-    against a gather at every texel (LEVELS = 0), within 1.5 % of each texel's light (0.1 %
-    on average), from far fewer gathers."""
+    against a gather at every texel (LEVELS = 0), within 1 % of each texel's light (0.1 % on
+    average; measured 0.42 % and 0.019 %), from far fewer gathers (724 of 3,968)."""
     v, t, uv = grid_plane(size=4, n=16)
     wall = cube([-0.1, -1.0, 0], [0.1, 1.0, 1.2])
     scene, (plane, wall_id) = scene_of((v, t), wall)
@@ -148,5 +148,5 @@ def test_bake_matches_gathering_at_every_texel(monkeypatch):
     relative = np.abs(sparse - every).max(axis=-1) / np.maximum(every.max(axis=-1), 1e-6)
     print(f"gathers: {counts[0]} -> {counts[sparse_gather.LEVELS]}; worst {100 * relative.max():.2f} %, "
           f"mean {100 * relative.mean():.3f} %")
-    assert relative.max() < 0.015 and relative.mean() < 0.001
+    assert relative.max() < 0.01 and relative.mean() < 0.001
     assert counts[sparse_gather.LEVELS] < 0.4 * counts[0]

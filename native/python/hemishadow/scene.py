@@ -221,8 +221,8 @@ class Scene:
         masks (H, P, 16) uint64 as `visibility` gives them, back (H, P) float32: the fraction
         of the disk's cells whose nearest blocker shows its back, which `valid` allows up to
         one half, and distance (H, P) float32: the harmonic mean distance to what the cells
-        see, cosine-weighted, a cell seeing nothing counting as infinitely far (irradiance
-        caching's R; inf where nothing is seen). Probes take their masks and validity from
+        see, cosine-weighted, over the cells that see something (irradiance caching's R;
+        inf where nothing is seen). Probes take their masks and validity from
         their gather's walks; lightmaps interpolate bounce light where the distance is large."""
         pts = _checks.points(points, "points")
         norms = None if normals is None else _normals(normals, len(pts))

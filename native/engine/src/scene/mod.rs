@@ -592,9 +592,9 @@ pub struct HemisphereView {
     /// The fraction of its cells that show back faces (`valid` when at most
     /// receivers::BACK_FACE_LIMIT).
     pub back: f32,
-    /// The harmonic mean distance to what its cells see, a cell seeing nothing counting as
-    /// infinitely far (irradiance caching's R: the cells are equal areas of the projected
-    /// disk, so the mean is cosine-weighted); infinite when it sees nothing.
+    /// The harmonic mean distance to what its cells see, over the cells that see something
+    /// (irradiance caching's R: the cells are equal areas of the projected disk, so the mean
+    /// is cosine-weighted); infinite when it sees nothing.
     pub distance: f32,
 }
 
@@ -602,13 +602,17 @@ fn hemisphere_view(sink: &DepthSink, full: &Mask) -> HemisphereView {
     HemisphereView { mask: closed_mask(sink, full), back: receivers::back_fraction(&sink.back), distance: harmonic_distance(sink) }
 }
 
-/// The disk's area over the sum of each seen cell's area / its depth (rim cells count for
-/// the part of the disk they hold: equal weights would overweigh the horizon).
+/// The area of the cells that see something over the sum of each one's area / its depth
+/// (rim cells count for the part of the disk they hold: equal weights would overweigh the
+/// horizon); infinite when nothing is seen.
 fn harmonic_distance(sink: &DepthSink) -> f32 {
     let samples = crate::disk_mask::cell_samples();
-    let near: f32 = sink.depth.iter().zip(samples).filter(|(t, _)| t.is_finite()).map(|(t, s)| s.area / t.max(f32::MIN_POSITIVE)).sum();
-    let disk: f32 = samples.iter().map(|s| s.area).sum();
-    disk / near
+    let (mut seen, mut near) = (0.0f32, 0.0f32);
+    for (t, s) in sink.depth.iter().zip(samples).filter(|(t, _)| t.is_finite()) {
+        seen += s.area;
+        near += s.area / t.max(f32::MIN_POSITIVE);
+    }
+    if near > 0.0 { seen / near } else { f32::INFINITY }
 }
 
 /// The cells the depth buffer covers, pinholes closed as `visibility` closes them.

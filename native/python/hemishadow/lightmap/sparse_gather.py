@@ -41,8 +41,9 @@ LEVELS = 2
 
 #: Lattice neighbours farther apart than this share of the distance to what they see
 #: (irradiance caching's harmonic mean distance R) do not interpolate: near a wall, light
-#: bends at the wall's scale.
-NEAR = 1.0
+#: bends at the wall's scale. Next to a box standing above a plane, 1.0 left texels 2.7 %
+#: off a gather at every texel, 0.5 1.2 % (tests/addon/test_lightmaps_atlas.py's scene).
+NEAR = 0.5
 
 _COS_NORMAL = np.cos(np.radians(20.0))
 
