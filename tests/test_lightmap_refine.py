@@ -70,7 +70,8 @@ def test_dark_texels_compare_as_a_hundredth_of_the_brightest():
 def test_adaptive_bake_matches_every_sample_for_far_fewer_samples(monkeypatch):
     """A wall on a plane under a sky and a sun: shadow edge, contact with the wall's footprint,
     light curving near the wall. Every sample of every texel (a sun ray each) against the
-    adaptive bake: the same maps within 1 % of the open value, from well under half the samples."""
+    adaptive bake: the same maps within 1 % of the open value, from well under half the samples
+    (without more samples on the sun's edge: `edge_samples` = samples)."""
     v, t, uv = grid_plane(size=4, n=16)
     wall = cube([-0.2, -1.0, 0], [0.2, 1.0, 0.8])
     scene, (plane, _) = scene_of((v, t), wall)
@@ -82,7 +83,7 @@ def test_adaptive_bake_matches_every_sample_for_far_fewer_samples(monkeypatch):
         queried.clear()
         maps[adaptive] = bake(scene, [Target(Surface(plane, v, t), uv)], resolution=64, lighting=uniform_sky(),
                               suns=[Sun((0.6, 0.3, 0.75), 3.0, math.radians(2))], samples=9, bounces=0,
-                              adaptive=adaptive, adaptive_suns=False)[0]
+                              adaptive=adaptive, adaptive_suns=False, edge_samples=9)[0]
         maps[adaptive]["samples"] = sum(queried)
     every, adaptive = maps[False], maps[True]
     covered = every["coverage"] > 0
@@ -119,3 +120,37 @@ def test_departures_within_least_never_refine():
     assert refined[6, 6] and refined[interior(12)].sum() == 1 + 4
     assert refined[5, 5] and refined[7, 7] and refined[5, 7] and refined[7, 5]  # their diagonal means rise 1.05 x least
     assert 1 / 810 < cell < 1 / 790
+
+
+def test_a_sun_edge_along_a_column_of_texels_takes_more_samples():
+    """A wall's sun shadow whose edge runs along a row of texels, between a texel's samples
+    (2 x 2) and its neighbour's: with 4 samples the texel is lit wholly, not for the part the
+    sun reaches. Texels whose samples disagree on the sun, or agree but not with a side
+    neighbour's, take `EDGE_SAMPLES` x 4 = 16: every texel within 0.1 of its lit fraction,
+    from a 32 x 32 grid of exact rays per texel (`Scene.occluded`), the wall's footprint left
+    out as the bake leaves out samples inside solid geometry."""
+    v, t, uv = grid_plane(size=4, n=2)
+    wall = cube([-2.0, -0.05, 0.0], [2.0, 0.05, 1.0])            # along x: its shadow edge runs along x too
+    scene, (plane, _) = scene_of((v, t), wall)
+    r = 16
+    sun = Sun((0.0, -0.6, 0.8), 3.0, 0.0)                          # towards -y: the shadow falls on +y
+    # the edge: where the ray clears the wall's top (y = 0.05, z = 1): y = 0.05 + 0.75 = 0.8, a
+    # fifth into row 4 (y in [1, 0.75]), whose sample rows lie at y = 0.9375 and 0.8125
+    target = [Target(Surface(plane, v, t), uv)]
+    maps = {e: bake(scene, target, resolution=r, suns=[sun], samples=4, bounces=0, edge_samples=e)[0]["flat"][..., 0]
+            for e in (4, None)}
+    # reference: the fraction of a 32 x 32 grid of points per texel that the sun reaches
+    g = (np.arange(32) + 0.5) / 32
+    rows, cols = np.mgrid[0:r, 0:r]
+    x = -2 + 4 * (cols[..., None, None] + g[None, None, None, :]) / r
+    y = 2 - 4 * (rows[..., None, None] + g[None, None, :, None]) / r
+    pts = np.stack(np.broadcast_arrays(x, y, np.zeros_like(x)), axis=-1).reshape(-1, 3).astype(np.float32)
+    d = np.asarray(sun.direction) / np.linalg.norm(sun.direction)
+    open_ = ~scene.occluded(pts + [0, 0, 1e-4], pts + 20 * d, offset=0.0)
+    outside = np.abs(pts[:, 1]) > 0.05                              # the wall's footprint: invalid samples, left out
+    lit = (open_ & outside).reshape(r, r, -1).sum(axis=-1) / np.maximum(outside.reshape(r, r, -1).sum(axis=-1), 1)
+    full = maps[None].max()
+    coarse = np.abs(maps[4] / full - lit).max()
+    fine = np.abs(maps[None] / full - lit).max()
+    print(f"worst texel off its lit fraction: 4 samples {coarse:.3f}, with edge samples {fine:.3f}")
+    assert coarse > 0.15 and fine < 0.1

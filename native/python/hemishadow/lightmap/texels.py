@@ -111,9 +111,10 @@ def _overlaps_square(tri, corner):
     return hit
 
 
-def rasterize(uv, resolution, samples, check=None):
+def rasterize(uv, resolution, samples, check=None, only=None):
     """Samples of every texel that the triangles' UVs (M, 3, 2) reach; see `Texels`. `check`:
-    called between chunks (a cancel raises there)."""
+    called between chunks (a cancel raises there). only: (R * R,) bool, the texels to sample
+    (None: all); `coverage` and `island` then hold those texels only."""
     r = int(resolution)
     tri = texel_space(uv, r)
     area = np.abs(_cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]))
@@ -138,6 +139,9 @@ def rasterize(uv, resolution, samples, check=None):
         cx = lo[t_idx, 0] + k % np.maximum(size[t_idx, 0], 1)
         cy = lo[t_idx, 1] + k // np.maximum(size[t_idx, 0], 1)
         cell = cy * r + cx
+        if only is not None:
+            wanted = only[cell]
+            t_idx, cell, cx, cy = t_idx[wanted], cell[wanted], cx[wanted], cy[wanted]
         corners = tri[t_idx]
         columns = _Corners(corners)
         x, y = cx.astype(np.float64), cy.astype(np.float64)
