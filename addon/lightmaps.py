@@ -36,7 +36,7 @@ class MeshData:
     uv: np.ndarray | None
     tangents: np.ndarray | None
     albedo: np.ndarray | None = None
-    blocker: tuple | None = None  # (vertices, triangles) before `subdivided`, when it split the mesh
+    blocker: tuple | None = None  # (vertices, triangles) before `bisected`, when it split the mesh
 
 
 def make_lightmap_uv(obj, name=DEFAULT_UV, method="LIGHTMAP", margin=0.05):
@@ -103,11 +103,13 @@ def _loop_vectors(collection, size, count, attr="vector"):
     return out.reshape(count, size)
 
 
-#: Bounce light is carried per vertex: meshes are subdivided until no edge is longer than this
-#: fraction of the scene's diagonal. The test room (4.4 x 4.4 x 2.9 m, walls and floor of one
-#: box each) against Cycles with 2 bounces: mean error over the floor 24 % with its boxes as
-#: they are, 1.4 % at this fraction (docs/lightmaps.md, "Bounce light against Cycles").
-BOUNCE_EDGE = 1 / 8
+#: Bounce light is carried per vertex: meshes are split (`bisected`) until no edge is longer than
+#: this fraction of the scene's diagonal. The test room (4.4 x 4.4 x 2.9 m, walls and floor of
+#: one box each) against Cycles with 2 bounces, mean error over the floor at 64 x 64
+#: (docs/lightmaps.md): 24 % with its boxes as they are; 2.15 % at 1/8, 1.44 % at 1/12, 1.16 %
+#: at 1/16 (0.68, 0.72, 1.0 s), 1.06 % at 1/20 (1.4 s): past 1/16 the walks cost more than the
+#: error saves against Cycles' samples.
+BOUNCE_EDGE = 1 / 16
 
 
 def bounce_edge(objects, depsgraph):
@@ -130,10 +132,10 @@ def read_mesh(obj, depsgraph, uv_name=None, albedo=False, max_edge=None):
     maps use); None when the mesh cannot have them (no UV map, n-gons), and the engine falls
     back to per-triangle tangents. Raises ValueError naming the object when `uv_name` is
     asked for and missing. `albedo`: also the Base Color per vertex (lightmap_albedo).
-    `max_edge`: triangles are split (`subdivided`) until no edge is longer (world units), for
+    `max_edge`: triangles are split (`bisected`) until no edge is longer (world units), for
     bounce light, which is carried per vertex; `blocker` keeps the triangles as they were
     (the same surface, for visibility: a mask walk over the split mesh costs 3-4x more)."""
-    from hemishadow.lightmap.geometry import split_sharp_vertices, subdivided, subdivision_levels
+    from hemishadow.lightmap.geometry import bisected, split_sharp_vertices
 
     obj_eval = obj.evaluated_get(depsgraph)
     mesh = obj_eval.to_mesh()
@@ -163,16 +165,14 @@ def read_mesh(obj, depsgraph, uv_name=None, albedo=False, max_edge=None):
         if colour is not None and np.ndim(colour) == 2:
             colour = colour[source]
         matrix = np.array(obj_eval.matrix_world, np.float64)
-        levels = subdivision_levels(vertices @ matrix[:3, :3].T + matrix[:3, 3], triangles, max_edge or 0.0)
-        blocker = None
-        if levels:
-            blocker = (vertices, triangles)
-            given = [a for a in (normals, uv, tangents) if a is not None]
-            vertices, triangles, corners, (colour,) = subdivided(vertices, triangles, levels, given, [colour])
-            corners = iter(corners)
-            normals, uv, tangents = (None if a is None else next(corners) for a in (normals, uv, tangents))
-            vertices = vertices.astype(np.float32)
-        return MeshData(vertices, triangles, normals, uv, tangents, colour, blocker)
+        given = [a for a in (normals, uv, tangents) if a is not None]
+        split = bisected(vertices, triangles, max_edge or 0.0, vertices @ matrix[:3, :3].T + matrix[:3, 3], given,
+                         [colour])
+        if len(split[1]) == len(triangles):
+            return MeshData(vertices, triangles, normals, uv, tangents, colour)
+        corners = iter(split[2])
+        normals, uv, tangents = (None if a is None else next(corners) for a in (normals, uv, tangents))
+        return MeshData(split[0].astype(np.float32), split[1], normals, uv, tangents, split[3][0], (vertices, triangles))
     finally:
         obj_eval.to_mesh_clear()
 
@@ -346,7 +346,7 @@ class Prepared:
     resolutions: list
     options: dict
     atlas: str | None = None  # the atlas's name when the targets share one map
-    bounce_scene: object = None  # the subdivided meshes that carry bounce light (None: engine_scene's)
+    bounce_scene: object = None  # the split meshes that carry bounce light (None: engine_scene's)
 
 
 LAYOUTS = ("ATLAS", "OBJECT")

@@ -7,7 +7,7 @@ import pytest
 
 hemishadow = pytest.importorskip("hemishadow")
 from hemishadow.lightmap import bounce  # noqa: E402
-from hemishadow.lightmap.geometry import split_sharp_vertices, subdivided, subdivision_levels  # noqa: E402
+from hemishadow.lightmap.geometry import bisected, split_sharp_vertices  # noqa: E402
 
 
 def cube():
@@ -95,39 +95,57 @@ def test_a_vertex_inside_a_wall_takes_its_neighbours_light():
     assert np.all(radiance[inside] >= radiance[beside].min() - 1e-6)
 
 
-def test_subdivision_keeps_the_surface_and_its_interpolation():
-    """Each split puts 4 triangles in place of 1 over the same area, shares midpoints between
-    neighbours (a closed cube stays closed: V - E + F = 2), and interpolates per-corner and
-    per-vertex values linearly: any point of a parent triangle gets the same value from its
-    child as from the parent."""
+def _edges(t):
+    return np.unique(np.sort(t[:, [[0, 1], [1, 2], [2, 0]]].reshape(-1, 2), axis=1), axis=0)
+
+
+def test_bisection_keeps_the_surface_closed_and_its_interpolation():
+    """Longest-edge bisection of a closed cube until no edge is longer than 0.3: the same area,
+    still closed (V - E + F = 2, every edge in two triangles) and wound alike, and per-corner and
+    per-vertex values interpolated linearly: each child's corners get their parent's values at
+    their barycentric coordinates in the parent."""
     v, t = cube()
     corner = np.random.default_rng(1).normal(size=(len(t), 3, 2))
     colour = np.random.default_rng(2).uniform(size=(len(v), 3))
-    v2, t2, (c2,), (col2,) = subdivided(v, t, 2, [corner], [colour])
-    assert t2.shape == (16 * len(t), 3)
-    area = lambda p, q: np.linalg.norm(np.cross(p[q[:, 1]] - p[q[:, 0]], p[q[:, 2]] - p[q[:, 0]]), axis=1).sum()
-    assert area(v2, t2) == pytest.approx(area(v.astype(float), t))
-    edges = np.unique(np.sort(t2[:, [[0, 1], [1, 2], [2, 0]]].reshape(-1, 2), axis=1), axis=0)
+    v2, t2, (c2,), (col2,), parent = bisected(v, t, 0.3, None, [corner], [colour])
+    area = lambda p, q: np.cross(p[q[:, 1]] - p[q[:, 0]], p[q[:, 2]] - p[q[:, 0]])
+    assert np.linalg.norm(area(v2, t2), axis=1).sum() == pytest.approx(np.linalg.norm(area(v.astype(float), t), axis=1).sum())
+    edges = _edges(t2)
     assert len(v2) - len(edges) + len(t2) == 2
-    # Child k of parent p is row 16 p + k: its corners' values are the parent's, interpolated
-    # at the corners' barycentric coordinates in the parent.
-    for p in range(len(t)):
+    assert np.linalg.norm(v2[edges[:, 0]] - v2[edges[:, 1]], axis=1).max() <= 0.3
+    directed = t2[:, [[0, 1], [1, 2], [2, 0]]].reshape(-1, 2)
+    assert len(np.unique(directed, axis=0)) == len(directed)  # each edge once each way: consistent winding
+    np.testing.assert_array_less(0, (area(v2, t2) * area(v.astype(float), t)[parent]).sum(axis=1))
+    for child in range(len(t2)):
+        p = parent[child]
         a, b, c = v[t[p]].astype(float)
         m = np.stack([b - a, c - a], axis=1)
-        for k in range(16):
-            for j in range(3):
-                x = v2[t2[16 * p + k, j]]
-                beta, gamma = np.linalg.lstsq(m, x - a, rcond=None)[0]
-                w = np.array([1 - beta - gamma, beta, gamma])
-                np.testing.assert_allclose(c2[16 * p + k, j], w @ corner[p], atol=1e-12)
-                np.testing.assert_allclose(col2[t2[16 * p + k, j]], w @ colour[t[p]], atol=1e-12)
-    assert subdivided(v, t, 1, [], [np.array([0.8, 0.8, 0.8])])[3][0].shape == (3,)  # a constant stays
+        for j in range(3):
+            beta, gamma = np.linalg.lstsq(m, v2[t2[child, j]] - a, rcond=None)[0]
+            w = np.array([1 - beta - gamma, beta, gamma])
+            np.testing.assert_allclose(c2[child, j], w @ corner[p], atol=1e-12)
+            np.testing.assert_allclose(col2[t2[child, j]], w @ colour[t[p]], atol=1e-12)
+    assert bisected(v, t, 0.5, None, [], [np.array([0.8, 0.8, 0.8])])[3][0].shape == (3,)  # a constant stays
 
 
-def test_subdivision_levels_follow_the_longest_edge_within_a_budget():
+def test_each_triangle_splits_as_much_as_its_own_edges_need():
+    """A large and a small triangle of one mesh, apart: the small one (edges up to 0.42) stays
+    whole under max edge 0.5 while the large one splits until its edges are short enough
+    (splitting a mesh a number of times set by its longest edge split both). Lengths are in
+    world units: scaled 2x, the small one splits too."""
+    v = np.array([[0.0, 0, 0], [4, 0, 0], [0, 4, 0], [10, 0, 0], [10.3, 0, 0], [10, 0.3, 0]])
+    t = np.array([[0, 1, 2], [3, 4, 5]])
+    v2, t2, _, _, parent = bisected(v, t, 0.5)
+    assert np.count_nonzero(parent == 1) == 1 and np.count_nonzero(parent == 0) > 64
+    assert np.linalg.norm(np.diff(v2[t2[parent == 0]][:, [0, 1, 2, 0]], axis=1), axis=2).max() <= 0.5
+    assert np.count_nonzero(bisected(v, t, 0.5, world=2 * v)[4] == 1) > 1
+
+
+def test_bisection_stops_within_its_budget_and_without_a_length():
     v, t = cube()
-    assert subdivision_levels(v, t, 2.0) == 0
-    assert subdivision_levels(v, t, 0.5) == 2  # the faces' diagonals, sqrt 2, need two halvings
-    assert subdivision_levels(v * 10, t, 0.5) == 5
-    assert subdivision_levels(v * 10, t, 0.5, max_triangles=12 * 4 ** 3) == 3
-    assert subdivision_levels(v, t, 0.0) == 0 and subdivision_levels(v, t[:0], 0.5) == 0
+    assert len(bisected(v, t, 0.01, max_triangles=500)[1]) <= 500
+    same = bisected(v, t, 0.0)
+    assert np.array_equal(same[1], t) and np.array_equal(same[0], v)
+    assert len(bisected(v, t, 2.0)[1]) == len(t)  # the longest edge, a face's diagonal sqrt 2, is short enough
+
+

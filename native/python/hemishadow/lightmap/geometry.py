@@ -134,52 +134,90 @@ def split_sharp_vertices(triangles, corner_normals):
     return inverse.reshape(tris.shape), unique[:, 0]
 
 
-def subdivided(vertices, triangles, levels, corner_values=(), vertex_values=()):
-    """The mesh with every triangle split into 4 at its edges' midpoints, `levels` times:
-    vertices (V', 3), triangles (M 4^levels, 3), each array of `corner_values` ((M, 3, ...):
-    per triangle corner) and of `vertex_values` ((V, ...); a (3,) colour is left as it is)
-    interpolated linearly, so that interpolating across a sub-triangle gives what it gave
-    across its parent (UVs, shading normals, tangents: the same texels). Bounce light is
-    carried per vertex: a room's walls of a few large triangles carried a sun patch, or a
-    lamp's pool of light, by their corners only. Midpoints are made once per edge (vertex
-    ids, so a mesh split at sharp edges stays split), and shared edges get one."""
+def bisected(vertices, triangles, max_edge, world=None, corner_values=(), vertex_values=(), max_triangles=200_000):
+    """The mesh with its edges longer than `max_edge` split at their midpoints, conformingly:
+    longest-edge bisection (Rivara 1984). Each round, every triangle whose longest edge is too
+    long splits it; a triangle sharing a split edge that is not its own longest splits its
+    longest too (so no vertex lands on an edge it does not end; the closure), and a triangle
+    then splits into 2, 3 or 4 along its marked edges. Thin triangles split along their length
+    only: a 4.4 x 0.2 m face of a wall gets 16 triangles, not the 64 of splitting every edge.
+    Bounce light is carried per vertex: a room's walls of a few large triangles carried a sun
+    patch, or a lamp's pool of light, by their corners only.
+
+    Edge lengths are measured in `world` (V, 3) positions (None: `vertices`); midpoints are
+    made once per edge (vertex ids: a mesh split at sharp edges stays split). Returns the
+    vertices (V', 3), triangles (M', 3), each array of `corner_values` ((M, 3, ...): per
+    triangle corner) and of `vertex_values` ((V, ...); a (3,) colour is left as it is)
+    interpolated linearly, so interpolating across a child gives what its parent gave (UVs,
+    shading normals, tangents: the same texels), and each child's parent (M',). Rounds stop
+    before the triangles would pass `max_triangles`."""
     v = np.asarray(vertices, dtype=np.float64)
-    t = np.asarray(triangles, dtype=np.int64)
+    w = v if world is None else np.asarray(world, dtype=np.float64)
+    t = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
     corners = [np.asarray(c) for c in corner_values]
     per_vertex = [np.asarray(a, dtype=np.float64) if np.ndim(a) == 2 else a for a in vertex_values]
-    for _ in range(int(levels)):
-        edges = np.sort(t[:, [[0, 1], [1, 2], [2, 0]]].reshape(-1, 2), axis=1)
-        unique, inverse = np.unique(edges, axis=0, return_inverse=True)
-        mid = len(v) + inverse.reshape(-1, 3)  # midpoint ids of edges ab, bc, ca
-        v = np.concatenate([v, v[unique].mean(axis=1)])
-        per_vertex = [np.concatenate([a, a[unique].mean(axis=1)]) if np.ndim(a) == 2 else a for a in per_vertex]
-        a, b, c = t.T
-        ab, bc, ca = mid.T
-        t = np.stack([np.stack([a, ab, ca], 1), np.stack([ab, b, bc], 1), np.stack([ca, bc, c], 1),
-                      np.stack([ab, bc, ca], 1)], axis=1).reshape(-1, 3)
-        corners = [_split_corners(c) for c in corners]
-    return v, t, corners, per_vertex
+    parent = np.arange(len(t))
+    while max_edge > 0 and len(t):
+        idx, unique, longest = _edges_and_longest(t, w)
+        marked = np.zeros(len(unique), bool)
+        too_long = np.linalg.norm(w[unique[longest, 0]] - w[unique[longest, 1]], axis=1) > max_edge
+        marked[longest[too_long]] = True
+        if not marked.any():
+            break
+        while True:  # the closure: a triangle with a marked edge splits its longest one too
+            need = marked[idx].any(axis=1) & ~marked[longest]
+            if not need.any():
+                break
+            marked[longest[need]] = True
+        if len(t) + int(marked[idx].sum()) > max_triangles:
+            break
+        mid = np.full(len(unique), -1, np.int64)
+        mid[marked] = len(v) + np.arange(int(marked.sum()))
+        ends = unique[marked]
+        v, w = np.concatenate([v, v[ends].mean(axis=1)]), np.concatenate([w, w[ends].mean(axis=1)])
+        per_vertex = [np.concatenate([a, a[ends].mean(axis=1)]) if np.ndim(a) == 2 else a for a in per_vertex]
+        t, corners, parent = _split(t, idx, longest, marked, mid, corners, parent)
+    return v, t, corners, per_vertex, parent
 
 
-def _split_corners(values):
-    """Per-corner values of each triangle's four children (`subdivided`'s order)."""
-    a, b, c = values[:, 0], values[:, 1], values[:, 2]
-    ab, bc, ca = (a + b) / 2, (b + c) / 2, (c + a) / 2
-    children = [np.stack(x, axis=1) for x in ((a, ab, ca), (ab, b, bc), (ca, bc, c), (ab, bc, ca))]
-    return np.stack(children, axis=1).reshape((-1,) + values.shape[1:]).astype(values.dtype)
+def _edges_and_longest(t, w):
+    """Per triangle its edges' ids (M, 3) (edge k joins corners k and k + 1), the unique edges
+    (E, 2) and each triangle's longest edge id (ties go to the lowest id, the same choice on
+    both sides of an edge)."""
+    pairs = np.sort(t[:, [[0, 1], [1, 2], [2, 0]]], axis=2).reshape(-1, 2)
+    unique, inverse = np.unique(pairs, axis=0, return_inverse=True)
+    idx = inverse.reshape(-1, 3)
+    length = np.linalg.norm(w[unique[:, 0]] - w[unique[:, 1]], axis=1)[idx]
+    rank = np.where(length >= length.max(axis=1, keepdims=True) * (1 - 1e-12), idx, len(unique))
+    return idx, unique, idx[np.arange(len(t)), rank.argmin(axis=1)]
 
 
-def subdivision_levels(world_vertices, triangles, max_edge, max_triangles=200_000):
-    """How many times `subdivided` must split a mesh for its longest edge (world units) to
-    be at most `max_edge`, within `max_triangles` (0 when it already is)."""
-    if not len(triangles) or not max_edge > 0:
-        return 0
-    p = np.asarray(world_vertices, dtype=np.float64)[np.asarray(triangles, dtype=np.int64)]
-    longest = np.linalg.norm(p - np.roll(p, 1, axis=1), axis=2).max()
-    levels = int(np.ceil(np.log2(longest / max_edge))) if longest > max_edge else 0
-    while levels and len(triangles) * 4 ** levels > max_triangles:
-        levels -= 1
-    return levels
+def _split(t, idx, longest, marked, mid, corners, parent):
+    """Each triangle with a marked edge (its longest among them) into 2, 3 or 4 children:
+    halves at its longest edge ab (a, m_ab, c), (m_ab, b, c), each halved again at its own
+    marked edge ca or bc. Children follow their parent, in order, windings kept."""
+    rows = np.arange(len(t))
+    k = np.argmax(idx == longest[:, None], axis=1)      # the longest edge's slot: corners k, k + 1
+    rot = (k[:, None] + np.arange(3)) % 3
+    a, b, c = (t[rows, rot[:, j]] for j in range(3))
+    m_ab, m_bc, m_ca = (mid[idx[rows, rot[:, j]]] for j in range(3))
+    split = marked[longest]
+    first, second = split & (m_ca >= 0), split & (m_bc >= 0)
+    # children as corner choices: 0 a, 1 b, 2 c, 3 m_ab, 4 m_bc, 5 m_ca
+    choice = np.array([[0, 1, 2], [0, 3, 2], [0, 3, 5], [3, 2, 5], [3, 1, 2], [3, 1, 4], [3, 4, 2]])
+    which = np.stack([np.where(split, np.where(first, 2, 1), 0), np.where(first, 3, -1),
+                      np.where(split, np.where(second, 5, 4), -1), np.where(second, 6, -1)], axis=1)
+    keep = which >= 0
+    pick = choice[np.maximum(which, 0)]                  # (M, 4, 3)
+    ids = np.stack([a, b, c, m_ab, m_bc, m_ca], axis=1)
+    children = np.take_along_axis(ids[:, None, :].repeat(4, axis=1), pick, axis=2)[keep]
+
+    def values(cv):
+        va, vb, vc = (cv[rows, rot[:, j]] for j in range(3))
+        six = np.stack([va, vb, vc, (va + vb) / 2, (vb + vc) / 2, (vc + va) / 2], axis=1).astype(cv.dtype)
+        return np.stack([six[rows[:, None], pick[:, :, j]] for j in range(3)], axis=2)[keep]
+
+    return children, [values(cv) for cv in corners], np.repeat(parent, keep.sum(axis=1))
 
 
 #: Vertex receivers move this fraction of the way towards the mean centroid of their
