@@ -237,9 +237,9 @@ class Scene:
         `BounceWeights.irradiance()` then equals `gather(points, normals, bands=3)` evaluated
         along each normal (irradiance / pi, clamped at 0; `lightmap.bounce.lobe_irradiance`)
         under whatever radiance the scene shows at that time; `BounceWeights.masks` and
-        `.valid` are the receivers' `visibility` masks and validity from the same walk. Once the scene's geometry or
-        instances change, `irradiance()` raises ValueError (what the receivers see may have
-        changed)."""
+        `.valid` are the receivers' `visibility` masks and validity from the same walk. Once
+        the scene's geometry or instances change, `irradiance()` raises ValueError (what the
+        receivers see may have changed)."""
         pts, norms = self._receivers(points, normals)
         native = self._native.bounce_weights(pts, norms, _checks.offset(offset), _checks.progress(progress))
         return BounceWeights(self, native)

@@ -251,7 +251,8 @@ def bake(scene, targets, *, resolution, lighting=None, suns=(), lamps=(), surfac
         neighbours disagree (`_sun_lit`: an edge between two texels' first rays is missed);
         False (the default): a ray per sample. stitch_seams: match texels across UV seams.
     bounce_scene: a `hemishadow.Scene` of the same surfaces, mesh for mesh (same ids), with
-        more vertices to carry bounce light (the add-on subdivides long edges); None: `scene`.
+        more vertices to carry bounce light (the add-on splits long edges, `geometry.bisected`);
+        None: `scene`.
         `scene` then serves direct light only: its coarser meshes make those walks cheaper.
     progress: None or a callable taking the fraction done; returning False raises
         `hemishadow.Cancelled` and nothing is returned.
@@ -301,13 +302,8 @@ def bake(scene, targets, *, resolution, lighting=None, suns=(), lamps=(), surfac
     if centres is None:
         lit = _light(scene, full, offs, adaptive_suns=adaptive_suns, **light_args)
     else:
-        def finer(grid):
-            wanted = [grid[0].ravel() if atlas else grid[k, :r, :r].ravel() for k, r in enumerate(sizes)]
-            geo_edges = [_sample_geometry(tg, r, edge_samples, steps.check, only=w)
-                         for tg, r, w in zip(targets, sizes, wanted)]
-            return _Samples.of(geo_edges, sizes, atlas, basis), texels.offsets(edge_samples)
-
-        lit = _refined(scene, centres, full, offs, contrast, steps, light_args, finer if edge_samples > samples else None)
+        finer = _edge_sampler(targets, sizes, atlas, basis, edge_samples, steps.check) if edge_samples > samples else None
+        lit = _refined(scene, centres, full, offs, contrast, steps, light_args, finer)
     if receivers:
         gathered = _indirect(bounce_scene, receivers, lit, lighting, suns, lamps, bounces, offset, steps)
         if gathered is not None:
@@ -422,6 +418,17 @@ def _refined(scene, centres, full, offsets, contrast, steps, light_args, finer=N
     return lit.take(~refine[centres.cell]).joined(refined)
 
 
+def _edge_sampler(targets, sizes, atlas, basis, samples, check):
+    """`_refined`'s `finer`: `samples` per texel of the texels a (layers, R, R) grid asks for
+    (`_Samples` and their offsets), rasterized for those texels only."""
+    def finer(grid):
+        wanted = [grid[0].ravel() if atlas else grid[k, :r, :r].ravel() for k, r in enumerate(sizes)]
+        geo = [_sample_geometry(tg, r, samples, check, only=w) for tg, r, w in zip(targets, sizes, wanted)]
+        return _Samples.of(geo, sizes, atlas, basis), texels.offsets(samples)
+
+    return finer
+
+
 def _sun_edges(scene, samples, offsets, suns, offset, shape, steps):
     """(layers * R * R,) bool: texels (of the grid `shape`) whose valid samples disagree on
     whether a sun reaches them (one ray each, as `direct_light` casts them), or agree but
@@ -435,7 +442,7 @@ def _sun_edges(scene, samples, offsets, suns, offset, shape, steps):
         if facing.any():
             lit[facing, k] = _sun_rays(scene, samples.points[facing], samples.ng[facing], dirs[facing], offset, steps)
     cells_count = int(np.prod(shape))
-    edges = refinement.disagreeing(samples.cell, samples.valid, lit, cells_count, spread=0.5)
+    edges = refinement.disagreeing(samples.cell, samples.valid, lit, cells_count)
     return edges | refinement.differs_from_a_neighbour(samples.cell, samples.valid, lit, shape)
 
 

@@ -83,10 +83,10 @@ MAX_WEIGHT_ENTRIES = 1 << 27
 class VertexRecord:
     """The bounce surfaces' usable vertices and what one walk each sees from them
     (`Scene.bounce_weights`): their visibility masks, for their direct light, whether they
-    are inside solid geometry, and their gather weights. Which surface a vertex sees in each direction is the same in every
-    pass, so every pass reuses the weights instead of walking the scene again; past
-    MAX_WEIGHT_ENTRIES they are dropped and each pass gathers anew. Recording steps
-    `steps` once per vertex, the first pass's share."""
+    are inside solid geometry, and their gather weights. Which surface a vertex sees in
+    each direction is the same in every pass, so every pass reuses the weights instead of
+    walking the scene again; past MAX_WEIGHT_ENTRIES they are dropped and each pass gathers
+    anew. Recording steps `steps` once per vertex, the first pass's share."""
 
     def __init__(self, scene, receivers, offset=None, progress=None, steps=None):
         self.scene, self.offset, self.progress, self.steps = scene, offset, progress, steps

@@ -69,19 +69,15 @@ def texels_to_refine(values, usable, contrast=CONTRAST, full=None, least=None):
 
 
 
-def disagreeing(cell, valid, values, cells, spread):
+def disagreeing(cell, valid, values, cells):
     """(cells,) bool: texels whose valid samples' `values` (P, C) (`cell` (P,): each sample's
-    texel) spread (largest minus smallest) by more than `spread` of their mean in some
-    channel."""
+    texel) are not all the same."""
     cell, values = cell[valid], values[valid]
     lo = np.full((cells, values.shape[1]), np.inf)
     hi = np.full((cells, values.shape[1]), -np.inf)
     np.minimum.at(lo, cell, values)
     np.maximum.at(hi, cell, values)
-    count = np.bincount(cell, minlength=cells)
-    mean = np.stack([np.bincount(cell, values[:, c], cells) for c in range(values.shape[1])], axis=1)
-    mean /= np.maximum(count, 1)[:, None]
-    return (count > 1) & ((hi - lo) > spread * np.maximum(np.abs(mean), 1e-30)).any(axis=1)
+    return (hi > lo).any(axis=1)
 
 
 def differs_from_a_neighbour(cell, valid, values, shape):
@@ -95,11 +91,9 @@ def differs_from_a_neighbour(cell, valid, values, shape):
     known = (count > 0).reshape(shape)
     out = np.zeros(shape, bool)
     for axis in (1, 2):
-        a = [slice(None)] * 3
-        b = [slice(None)] * 3
-        a[axis], b[axis] = slice(None, -1), slice(1, None)
-        a, b = tuple(a), tuple(b)
-        differ = known[a] & known[b] & (mean[a] != mean[b]).any(axis=-1)
-        out[a] |= differ
-        out[b] |= differ
+        lower = tuple(slice(None, -1) if a == axis else slice(None) for a in range(3))
+        upper = tuple(slice(1, None) if a == axis else slice(None) for a in range(3))
+        differ = known[lower] & known[upper] & (mean[lower] != mean[upper]).any(axis=-1)
+        out[lower] |= differ
+        out[upper] |= differ
     return out.reshape(-1)
