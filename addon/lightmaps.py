@@ -111,6 +111,13 @@ def _loop_vectors(collection, size, count, attr="vector"):
 #: error saves against Cycles' samples.
 BOUNCE_EDGE = 1 / 16
 
+#: `Scene.lod` of the scene direct light walks: a node is drawn through its proxy only where
+#: it subtends less than this. At the engine's default (0.15) the test room's floor, lit by
+#: the sky alone through its window, baked 4.4 % dark against Cycles (0.7 % at 0.05: proxies
+#: of the walls around the window cut into it), and the corner's median error was 0.21 %
+#: (0.15 % at 0.05). Through meshes as they are, not split for bounce light, it costs little.
+DIRECT_LOD = 0.05
+
 
 def bounce_edge(objects, depsgraph):
     """The longest edge bounce surfaces keep (`BOUNCE_EDGE` of the objects' world box's
@@ -411,7 +418,7 @@ def prepare(scene, objects, *, uv_name=DEFAULT_UV, resolution=256, texel_density
         resolution = atlas_resolution(objects, uv_name, resolution, texel_density, margin)
         uv_name, texel_density, depsgraph = lightmap_atlas.ATLAS_UV, None, None  # evaluated after the layout
     depsgraph = depsgraph or bpy.context.evaluated_depsgraph_get()
-    engine_scene = hemishadow.Scene()
+    engine_scene = hemishadow.Scene(lod=DIRECT_LOD)
     surfaces, pairs = {}, []
     baked = {o.name for o in objects}
     meshes = sorted(set(blockers(scene)) | set(objects), key=lambda o: (o.name not in baked, o.name))
