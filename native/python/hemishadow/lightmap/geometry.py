@@ -139,8 +139,11 @@ def bisected(vertices, triangles, max_edge, world=None, corner_values=(), vertex
     longest-edge bisection (Rivara 1984). Each round, every triangle whose longest edge is too
     long splits it; a triangle sharing a split edge that is not its own longest splits its
     longest too (so no vertex lands on an edge it does not end; the closure), and a triangle
-    then splits into 2, 3 or 4 along its marked edges. Thin triangles split along their length
-    only: a 4.4 x 0.2 m face of a wall gets 16 triangles, not the 64 of splitting every edge.
+    then splits into 2, 3 or 4 along its marked edges. Each triangle splits as much as its own
+    edges need, where halving the whole mesh a number of times set by its longest edge split
+    a box's small faces as often as its large ones (the test room's bounce vertices: 1,685
+    against 3,597 at the same length). A thin strip gains nothing: a 4.4 x 0.2 face split to
+    0.55 gets 150 triangles, three halvings of every edge 128.
     Bounce light is carried per vertex: a room's walls of a few large triangles carried a sun
     patch, or a lamp's pool of light, by their corners only.
 
@@ -158,10 +161,9 @@ def bisected(vertices, triangles, max_edge, world=None, corner_values=(), vertex
     per_vertex = [np.asarray(a, dtype=np.float64) if np.ndim(a) == 2 else a for a in vertex_values]
     parent = np.arange(len(t))
     while max_edge > 0 and len(t):
-        idx, unique, longest = _edges_and_longest(t, w)
+        idx, unique, longest, longest_length = _edges_and_longest(t, w)
         marked = np.zeros(len(unique), bool)
-        too_long = np.linalg.norm(w[unique[longest, 0]] - w[unique[longest, 1]], axis=1) > max_edge
-        marked[longest[too_long]] = True
+        marked[longest[longest_length > max_edge]] = True
         if not marked.any():
             break
         while True:  # the closure: a triangle with a marked edge splits its longest one too
@@ -182,14 +184,15 @@ def bisected(vertices, triangles, max_edge, world=None, corner_values=(), vertex
 
 def _edges_and_longest(t, w):
     """Per triangle its edges' ids (M, 3) (edge k joins corners k and k + 1), the unique edges
-    (E, 2) and each triangle's longest edge id (ties go to the lowest id, the same choice on
-    both sides of an edge)."""
+    (E, 2), and each triangle's longest edge id (ties go to the lowest id, the same choice on
+    both sides of an edge) and length."""
     pairs = np.sort(t[:, [[0, 1], [1, 2], [2, 0]]], axis=2).reshape(-1, 2)
     unique, inverse = np.unique(pairs, axis=0, return_inverse=True)
     idx = inverse.reshape(-1, 3)
     length = np.linalg.norm(w[unique[:, 0]] - w[unique[:, 1]], axis=1)[idx]
-    rank = np.where(length >= length.max(axis=1, keepdims=True) * (1 - 1e-12), idx, len(unique))
-    return idx, unique, idx[np.arange(len(t)), rank.argmin(axis=1)]
+    longest = length.max(axis=1)
+    rank = np.where(length >= longest[:, None] * (1 - 1e-12), idx, len(unique))
+    return idx, unique, idx[np.arange(len(t)), rank.argmin(axis=1)], longest
 
 
 def _split(t, idx, longest, marked, mid, corners, parent):
