@@ -28,6 +28,7 @@ class Texels:
     island: np.ndarray     # (R, R) bool: texels with at least one sample
     index: np.ndarray      # (S,) int64: which of the texel's sample positions (0 for rim samples)
     overlapping: int       # samples strictly inside more than one triangle (overlapping UVs)
+    light: np.ndarray = None  # (S,) int64: the pattern each sample sees suns and lamps by (`light_patterns`)
 
 
 def offsets(samples):
@@ -40,6 +41,44 @@ def offsets(samples):
     g = 1.32471795724474602596  # plastic number: the R2 sequence (Roberts 2018)
     k = np.arange(1, samples + 1)[:, None]
     return (0.5 + k * np.array([1 / g, 1 / (g * g)])) % 1.0
+
+
+def light_patterns(key, index, samples):
+    """(S,) int64: per sample, the pattern (0 .. samples - 1) it samples area light through:
+    its position `index` in the texel, permuted by a pseudo-random permutation per texel
+    (`key` (S,): a number naming each sample's texel). Where a sample sits in its texel must
+    say nothing about where it looks on a sun's disk or a lamp: tied together (the same offset
+    for both), a sample on a texel's lit side also looked at the lamp's far side, and penumbrae
+    came out wider (a sun's edge in the room of bench/lightmap_cycles.py: 0.27 against Cycles'
+    0.19 on its dark side). One permutation for all texels cannot part them along every axis
+    with 4 samples; one per texel does on average (room, 128 x 128: 1.24 % off Cycles against
+    1.45 %). A texel's samples still take every pattern once."""
+    key, index = np.asarray(key, np.int64), np.asarray(index, np.int64)
+    if samples <= 1 or not len(key):
+        return index
+    hashes = _mixed(key.astype(np.uint64)[:, None] * np.uint64(samples) + np.arange(samples, dtype=np.uint64))
+    return np.argsort(hashes, axis=1)[np.arange(len(key)), index]
+
+
+def _mixed(x):
+    """SplitMix64's finaliser (Steele et al. 2014): well-spread 64-bit hashes of uint64 keys
+    (wrapping multiplication, as intended)."""
+    x = x + np.uint64(0x9E3779B97F4A7C15)
+    x = (x ^ (x >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+    x = (x ^ (x >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+    return x ^ (x >> np.uint64(31))
+
+
+def _texel_keys(texel, triangle, tri, resolution):
+    """(S,) int64: a number per sample naming its texel the same wherever an atlas slot moves
+    the layout by whole texels: the texel's lowest triangle and its place relative to that
+    triangle's UV box (so a target bakes the same in an atlas as alone)."""
+    first = np.full(resolution * resolution, np.iinfo(np.int64).max)
+    np.minimum.at(first, texel, triangle)
+    owner = first[texel]
+    anchor = np.floor(tri.min(axis=1)).astype(np.int64)[owner]
+    dx, dy = texel % resolution - anchor[:, 0], texel // resolution - anchor[:, 1]
+    return (owner * 4096 + dy) * 4096 + dx
 
 
 def texel_space(uv, resolution):
@@ -181,6 +220,8 @@ def rasterize(uv, resolution, samples, check=None, only=None):
     texel = np.concatenate([texel, t_cells])
     island = np.zeros(r * r, bool)
     island[texel] = True
-    return Texels(texel=texel, triangle=np.concatenate([tris, t_tris]), bary=np.concatenate([bary, t_bary]),
-                  coverage=coverage.reshape(r, r), island=island.reshape(r, r),
-                  index=np.concatenate([index, np.zeros(len(t_cells), np.int64)]), overlapping=int(overlapping))
+    index = np.concatenate([index, np.zeros(len(t_cells), np.int64)])
+    triangles = np.concatenate([tris, t_tris])
+    return Texels(texel=texel, triangle=triangles, bary=np.concatenate([bary, t_bary]),
+                  coverage=coverage.reshape(r, r), island=island.reshape(r, r), index=index,
+                  overlapping=int(overlapping), light=light_patterns(_texel_keys(texel, triangles, tri, r), index, len(offs)))
