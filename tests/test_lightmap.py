@@ -5,6 +5,7 @@ at the worst texel. Run from a worktree with PYTHONPATH=native/python when the i
 package is another checkout's.
 """
 
+import importlib
 import math
 
 import numpy as np
@@ -16,6 +17,8 @@ hemishadow = pytest.importorskip("hemishadow")
 import hemishadow.lightmap as lm  # noqa: E402  (fails, not skips, where it is missing)
 from hemishadow.lightmap import Sun, Surface, Target, bake, texels  # noqa: E402
 from hemishadow.lightmap import seams as seam_mod  # noqa: E402
+
+bake_module = importlib.import_module("hemishadow.lightmap.bake")  # `lm.bake` is the function
 
 B_OPEN = (1 + 1 / math.sqrt(3)) / 2  # an HL2 lobe on an open plane: 0.7887
 
@@ -130,6 +133,31 @@ def test_box_on_a_plane_darkens_and_invalid_texels_are_filled():
     # filled from valid neighbours (the darkest ring around the box), never black
     assert out["flat"][inside, 0].min() > 0.2
     assert out["flat"][inside, 0].max() <= out["flat"][near, 0].max() + 1e-6
+
+
+def test_samples_reached_from_a_valid_centre_are_valid(monkeypatch):
+    """Refined samples that a clear segment joins to their texel's valid centre skip the
+    validity walk: the same valid texels as with a walk for every sample (a thin slanted wall
+    and a box sunk through the plane: texels straddle both), and the same light."""
+    v, t, uv = grid_plane(n=8)
+    box = cube([-0.3, -0.3, -0.2], [0.3, 0.3, 0.5])
+    wall_v, wall_t = cube([-0.02, -0.9, -0.3], [0.02, 0.9, 0.6])
+    turn = np.array([[math.cos(0.4), -math.sin(0.4), 0], [math.sin(0.4), math.cos(0.4), 0], [0, 0, 1]])
+    scene, (mid, *_) = scene_of((v, t), box, (wall_v @ turn.T + [0.6, 0, 0], wall_t))
+    kwargs = dict(resolution=32, lighting=uniform_sky(), suns=[Sun((0.5, 0.3, 0.8), 2.0)], bounces=0, margin=0)
+    target = [Target(Surface(mid, v, t), uv)]
+    reached = []
+    original = bake_module._reached_from_centres
+    monkeypatch.setattr(bake_module, "_reached_from_centres",
+                        lambda *a: reached.append(original(*a)) or reached[-1])
+    ours = bake(scene, target, **kwargs)[0]
+    monkeypatch.setattr(bake_module, "_reached_from_centres", lambda s, c, samples, o: np.zeros(len(samples.points), bool))
+    walked = bake(scene, target, **kwargs)[0]
+    known = np.concatenate(reached)
+    print("samples reached from their centre", known.sum(), "of", len(known))
+    assert 0.5 * len(known) < known.sum() < len(known)  # most, not those beyond a wall
+    assert not ours["valid"].all() and np.array_equal(ours["valid"], walked["valid"])
+    assert np.abs(ours["flat"] - walked["flat"]).max() < 1e-4  # a centre 0.5 mm outside the wall, samples inside
 
 
 def test_environment_occlusion_against_ray_casting():

@@ -215,7 +215,7 @@ def lamp_light(scene, lamp, points, ng, lobes, index, offsets, lamp_points, offs
     weight = factor / d2 * (np.einsum("pnd,pd->pn", w, np.asarray(ng, np.float32)) > 0)
     todo = weight > 0
     if todo.any():
-        start = (np.asarray(points, np.float64) + np.asarray(ng, np.float64) * _lift(scene, offset)).astype(np.float32)
+        start = (np.asarray(points, np.float64) + np.asarray(ng, np.float64) * lift(scene, offset)).astype(np.float32)
         if todo.mean() > 0.5:  # most segments count: test them all, without gathering the ones that do
             weight *= ~scene.occluded(np.repeat(start, n, axis=0), pts.reshape(-1, 3), offset=offset).reshape(p, n)
         else:
@@ -234,6 +234,6 @@ def lamp_light(scene, lamp, points, ng, lobes, index, offsets, lamp_points, offs
     return maps.astype(np.float32), (None if sh is None else sh.astype(np.float32))
 
 
-def _lift(scene, offset):
+def lift(scene, offset):
     """The receivers' lift in world units (as the engine's masks lift them)."""
     return scene.size * (1e-4 if offset is None else offset)
