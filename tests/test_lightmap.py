@@ -612,6 +612,41 @@ def test_lamp_shadows_against_ray_casting(kind):
     assert err.max() <= one and (err > 1e-5 * ref.max()).mean() < 0.01
 
 
+@pytest.mark.parametrize("kind", ["point", "area"])
+def test_clear_beams_change_no_shadow(kind, monkeypatch):
+    """Samples that see the whole lamp past every triangle (`Scene.beams_clear`) skip their
+    segment tests: the same maps as testing every segment, for most of the samples' tests."""
+    scene, mid, (v, t, uv), wall = wall_scene()
+    lamp = (lm.Point((1.0, 0.2, 0.8), 800.0, radius=0.2) if kind == "point"
+            else lm.Area((1.2, 0.0, 1.3), (-0.3, 0, -1), (0, 1, 0), 800.0, shape="RECTANGLE", size=0.8, size_y=0.5))
+    kwargs = dict(resolution=32, lamps=[lamp], samples=4, bounces=0, margin=0)
+    target = [Target(Surface(mid, v, t), uv)]
+    answers = []
+    original = type(scene).beams_clear
+    monkeypatch.setattr(type(scene), "beams_clear", lambda *a, **k: answers.append(original(*a, **k)) or answers[-1])
+    ours = bake(scene, target, **kwargs)[0]
+    monkeypatch.setattr(type(scene), "beams_clear", lambda self, p, *a, **k: np.zeros(len(p), bool))
+    every = bake(scene, target, **kwargs)[0]
+    clear = np.concatenate(answers)
+    print(kind, "lamp: beams clear", clear.mean())
+    assert 0.4 < clear.mean() < 0.95
+    assert np.array_equal(ours["flat"], every["flat"])
+
+
+def test_beams_clear_refuses_bad_polygons():
+    scene, *_ = wall_scene()
+    p, n = np.array([[1.5, 1.5, 1e-3], [1.6, 1.2, 1e-3]]), np.tile([0, 0, 1.0], (2, 1))
+    square = np.array([[1, 1, 2], [2, 1, 2], [2, 2, 2], [1, 2, 2.0]])
+    assert scene.beams_clear(p, n, square).all()  # beside the wall, the lamp above
+    assert scene.beams_clear(p, n, np.stack([square, square])).all()
+    with pytest.raises(ValueError, match="polygons must have shape"):
+        scene.beams_clear(p, n, np.stack([square] * 3))
+    with pytest.raises(ValueError, match="3 to 8 corners"):
+        scene.beams_clear(p, n, square[:2])
+    with pytest.raises(ValueError, match="NaN or infinite"):
+        scene.beams_clear(p, n, square * np.nan)
+
+
 def test_indirect_only_lamp_lights_bounce_not_the_maps(monkeypatch):
     """indirect_only adds exactly the lamp's bounce: maps(indirect only) = maps(full) -
     maps(full, direct only) with bounce light gathered at every texel, and nothing without

@@ -276,6 +276,23 @@ impl PyScene {
         Ok(Array1::from_vec(hit).into_pyarray(py))
     }
 
+    /// bool (P,): whether nothing lies between each point and the whole of a convex polygon
+    /// (`engine::scene::beams`): polygons (corners, 3) shared or (P * corners, 3).
+    fn beams_clear<'py>(
+        &mut self,
+        py: Python<'py>,
+        points: PyReadonlyArray2<f32>,
+        normals: PyReadonlyArray2<f32>,
+        polygons: PyReadonlyArray2<f32>,
+        corners: usize,
+        offset: Option<f32>,
+    ) -> PyResult<Bound<'py, PyArray1<bool>>> {
+        let (p, n, q) = (rows3(&points, "points")?, rows3(&normals, "normals")?, rows3(&polygons, "polygons")?);
+        let inner = &mut self.inner;
+        let clear = run(py, || inner.beams_clear(&p, &n, &q, corners, offset))?;
+        Ok(Array1::from_vec(clear).into_pyarray(py))
+    }
+
     /// `gather`, with each walked hemisphere's mask (P, H, 16), back-face fraction (P, H) and
     /// harmonic mean distance (P, H).
     #[pyo3(signature = (points, normals, bands, offset, progress=None))]

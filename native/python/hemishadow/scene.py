@@ -197,6 +197,20 @@ class Scene:
             raise ValueError(f"targets has {len(tgts)} rows but points has {len(pts)}")
         return self._native.occluded(pts, tgts, _checks.offset(offset))
 
+    def beams_clear(self, points, normals, polygons, *, offset=None):
+        """bool (P,): True where no triangle lies between points[i] and any point of a convex
+        polygon above its tangent plane (normal normals[i]): polygons (K, 3), corners in order,
+        shared by all points, or (P, K, 3), 3 <= K <= 8. Conservative: False may still be
+        clear, True never hides a blocker of a segment to the polygon (lamps: `occluded` is
+        needed only where this is False). `offset` is left out at the polygon's end."""
+        pts, norms = self._receivers(points, normals)
+        poly = np.asarray(polygons, dtype=np.float32)
+        if poly.ndim not in (2, 3) or poly.shape[-1] != 3 or (poly.ndim == 3 and len(poly) != len(pts)):
+            raise ValueError(f"polygons must have shape (K, 3) or ({len(pts)}, K, 3), got {poly.shape}")
+        corners = poly.shape[-2]
+        flat = _checks.points(poly.reshape(-1, 3), "polygons")
+        return self._native.beams_clear(pts, norms, flat, corners, _checks.offset(offset))
+
     def visibility_valid(self, points, normals, *, offset=None):
         """(`visibility`, `valid`), the same values, from one walk per receiver with the
         blockers split by facing (the ordered walk only where more than half of the disk

@@ -11,6 +11,7 @@
 //! instances builds what is new (and rebuilds the top tree, which is cheap).
 
 pub mod affine;
+pub mod beams;
 pub mod bounce_weights;
 pub mod casters;
 pub mod clusters;
@@ -407,6 +408,36 @@ impl Scene {
             .par_iter()
             .zip(targets)
             .map_init(Vec::new, |stack, (p, t)| segments.occluded(*p, *t, offset, stack))
+            .collect())
+    }
+
+    /// Per point, whether no triangle can reach into the pyramid from it to a convex polygon
+    /// of `corners` corners (in order), above the point's tangent plane (`normals`): one
+    /// polygon for every point, or one per point, flat in `polygons`. `offset` (a fraction of
+    /// `size()`) is left out at the polygon's end, as `occluded` leaves it out. Conservative
+    /// (`beams`): where it says clear, every segment to a point of the polygon above the
+    /// tangent plane is; elsewhere, test the segments.
+    pub fn beams_clear(&mut self, points: &[Vec3], normals: &[Vec3], polygons: &[Vec3], corners: usize, offset: Option<f32>) -> Result<Vec<bool>> {
+        receivers::check(points, Some(normals))?;
+        receivers::check(polygons, None)?;
+        if !(3..=beams::MAX_CORNERS).contains(&corners) {
+            return Err(Error::invalid(format!("a polygon has 3 to {} corners, got {corners}", beams::MAX_CORNERS)));
+        }
+        let shared = polygons.len() == corners;
+        if !shared && polygons.len() != points.len() * corners {
+            return Err(Error::invalid(format!("polygons holds {} corners: {corners} (one polygon) or {corners} per point ({})", polygons.len(), points.len() * corners)));
+        }
+        let offset = receivers::offset(offset, self.size())?;
+        let (trees, positions) = self.walk_parts();
+        let segments = segments::Segments::new(&trees, &positions, &self.instances, self.top.as_ref().expect("prepared"));
+        Ok(points
+            .par_iter()
+            .enumerate()
+            .map_init(|| (Vec::new(), Vec::new()), |(stack, inner), (i, p)| {
+                let polygon = if shared { polygons } else { &polygons[i * corners..(i + 1) * corners] };
+                let n = crate::mesh::normalize(normals[i]).expect("checked");
+                segments.beam_clear(*p, n, polygon, offset, stack, inner)
+            })
             .collect())
     }
 

@@ -406,3 +406,41 @@ fn a_walk_that_knows_blocked_cells_stops_early_with_the_same_union() {
     }
     assert!(stopped >= 50 && drawn_knowing < drawn_all * 19 / 20, "stopped early {stopped} of 100 times, {drawn_knowing} of {drawn_all} triangles drawn");
 }
+
+#[test]
+fn clear_beams_have_clear_segments_and_open_ones_are_found() {
+    // floor, a floating cube turned and scaled (an instance), and a lamp square above them
+    let mut scene = Scene::new();
+    let (v, t) = floor(3.0, 6);
+    let f = scene.add_mesh(&v, &t).unwrap();
+    scene.add_instance(f, &IDENTITY).unwrap();
+    let (v, t) = cube();
+    let c = scene.add_mesh(&v, &t).unwrap();
+    let (s, r) = (0.6f64, 0.5f64);
+    let m = [s * r.cos(), -s * r.sin(), 0.0, 0.4, s * r.sin(), s * r.cos(), 0.0, -0.3, 0.0, 0.0, s, 1.0, 0.0, 0.0, 0.0, 1.0];
+    scene.add_instance(c, &m).unwrap();
+    scene.prepare();
+    let lamp: Vec<Vec3> = vec![[-0.5, -0.3, 2.5], [0.5, -0.3, 2.5], [0.5, 0.3, 2.5], [-0.5, 0.3, 2.5]];
+    let points: Vec<Vec3> = (0..400).map(|i| [-2.9 + 5.8 * (i % 20) as f32 / 19.0, -2.9 + 5.8 * (i / 20) as f32 / 19.0, 1e-3]).collect();
+    let up = vec![[0.0, 0.0, 1.0]; points.len()];
+    let clear = scene.beams_clear(&points, &up, &lamp, 4, None).unwrap();
+    let grid: Vec<Vec3> = (0..64).map(|k| {
+        let (u, w) = ((k % 8) as f32 / 7.0, (k / 8) as f32 / 7.0);
+        [-0.5 + u, -0.3 + 0.6 * w, 2.5]
+    }).collect();
+    let mut partly = 0;
+    for (p, &is_clear) in points.iter().zip(&clear) {
+        let starts = vec![*p; grid.len()];
+        let blocked = scene.occluded(&starts, &grid, None).unwrap();
+        if is_clear {
+            assert!(!blocked.iter().any(|&b| b), "{p:?}: the beam is clear but a segment is not");
+        }
+        partly += blocked.iter().any(|&b| b) as usize;
+    }
+    let clear_count = clear.iter().filter(|&&c| c).count();
+    assert!(partly > 20 && clear_count + partly > 380, "clear {clear_count}, shadowed {partly} of 400");
+    // one polygon per point, the same answers
+    let per_point: Vec<Vec3> = points.iter().flat_map(|_| lamp.iter().copied()).collect();
+    assert_eq!(scene.beams_clear(&points, &up, &per_point, 4, None).unwrap(), clear);
+    assert!(scene.beams_clear(&points, &up, &lamp[..2], 2, None).is_err());
+}

@@ -214,13 +214,13 @@ def lamp_light(scene, lamp, points, ng, lobes, index, offsets, lamp_points, offs
     p, n = factor.shape
     weight = factor / d2 * (np.einsum("pnd,pd->pn", w, np.asarray(ng, np.float32)) > 0)
     todo = weight > 0
-    if todo.any():
+    rows = np.flatnonzero(todo.any(axis=1))
+    if len(rows):
         start = (np.asarray(points, np.float64) + np.asarray(ng, np.float64) * lift(scene, offset)).astype(np.float32)
-        if todo.mean() > 0.5:  # most segments count: test them all, without gathering the ones that do
-            weight *= ~scene.occluded(np.repeat(start, n, axis=0), pts.reshape(-1, 3), offset=offset).reshape(p, n)
-        else:
-            rows, cols = np.nonzero(todo)
-            weight[rows, cols] *= ~scene.occluded(start[rows], pts[rows, cols], offset=offset)
+        if n > 1:  # where nothing lies between a sample and the whole lamp, none of its segments is blocked
+            polygon = _polygon(lamp, np.asarray(points, np.float32)[rows])
+            rows = rows[~scene.beams_clear(start[rows], np.asarray(ng)[rows], polygon, offset=offset)]
+        _shadow(scene, weight, todo, rows, start, pts, offset)
     cosine = np.maximum(np.einsum("pld,pnd->pln", np.asarray(lobes, np.float32), w), 0)
     maps = np.einsum("pln,pn->pl", cosine, weight)[..., None] * (lamp.power / np.pi)
     sh = None
@@ -232,6 +232,37 @@ def lamp_light(scene, lamp, points, ng, lobes, index, offsets, lamp_points, offs
             y = sh_basis(w.reshape(-1, 3), sh_bands).reshape(p, n, -1)
         sh = np.einsum("pnk,pn->pk", y, weight)[..., None] * (lamp.power / np.pi)
     return maps.astype(np.float32), (None if sh is None else sh.astype(np.float32))
+
+
+def _shadow(scene, weight, todo, rows, start, pts, offset):
+    """Zeroes in `weight` (P, n) the segments of `rows` that `todo` (P, n) asks for and a
+    triangle blocks, from `start` (P, 3) to `pts` (P, n, 3)."""
+    if not len(rows):
+        return
+    n = pts.shape[1]
+    if todo[rows].mean() > 0.5:  # most segments count: test them all, without gathering the ones that do
+        blocked = scene.occluded(np.repeat(start[rows], n, axis=0), pts[rows].reshape(-1, 3), offset=offset)
+        weight[rows] *= ~blocked.reshape(len(rows), n)
+    else:
+        r, c = np.nonzero(todo[rows])
+        weight[rows[r], c] *= ~scene.occluded(start[rows[r]], pts[rows[r], c], offset=offset)
+
+
+def _polygon(lamp, receivers):
+    """A convex polygon holding every point a sample at each of `receivers` (P, 3) sees on the
+    lamp: an area lamp's rectangle (a disk's or ellipse's bounding one), (4, 3); the square
+    around the disk of a point or spot lamp facing each receiver, (P, 4, 3)."""
+    square = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]], np.float32) / 2
+    if isinstance(lamp, Area):
+        v_axis = np.cross(lamp.direction, lamp.axis_u)
+        axes = np.array([lamp.axis_u * lamp.size, v_axis * lamp.size_y], np.float32)
+        return np.asarray(lamp.position, np.float32) + np.einsum("kj,jd->kd", square, axes)  # einsum: see `_sampled`
+    position = np.asarray(lamp.position, np.float32)
+    axis = receivers - position
+    axis /= np.maximum(np.linalg.norm(axis, axis=1, keepdims=True), 1e-30)
+    t, b = (f.astype(np.float32) for f in cells.engine_frame(axis))
+    corners = 2 * lamp.radius * square  # the disk of radius r inside the square of side 2 r
+    return position + corners[None, :, :1] * t[:, None] + corners[None, :, 1:] * b[:, None]
 
 
 def lift(scene, offset):
