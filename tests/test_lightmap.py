@@ -136,9 +136,10 @@ def test_box_on_a_plane_darkens_and_invalid_texels_are_filled():
 
 
 def test_samples_reached_from_a_valid_centre_are_valid(monkeypatch):
-    """Refined samples that a clear segment joins to their texel's valid centre skip the
-    validity walk: the same valid texels as with a walk for every sample (a thin slanted wall
-    and a box sunk through the plane: texels straddle both), and the same light."""
+    """Refined samples that a clear segment joins to their texel's valid centre, and centres
+    joined so to a valid centre two texels away at most, skip the validity walk: the same
+    valid texels as with a walk for every sample (a thin slanted wall and a box sunk through
+    the plane: texels straddle both), and the same light."""
     v, t, uv = grid_plane(n=8)
     box = cube([-0.3, -0.3, -0.2], [0.3, 0.3, 0.5])
     wall_v, wall_t = cube([-0.02, -0.9, -0.3], [0.02, 0.9, 0.6])
@@ -149,9 +150,9 @@ def test_samples_reached_from_a_valid_centre_are_valid(monkeypatch):
     reached = []
     original = bake_module._reached_from_centres
     monkeypatch.setattr(bake_module, "_reached_from_centres",
-                        lambda *a: reached.append(original(*a)) or reached[-1])
+                        lambda *a, **k: reached.append(original(*a, **k)) or reached[-1])
     ours = bake(scene, target, **kwargs)[0]
-    monkeypatch.setattr(bake_module, "_reached_from_centres", lambda s, c, samples, o: np.zeros(len(samples.points), bool))
+    monkeypatch.setattr(bake_module, "_reached_from_centres", lambda s, c, samples, o, **k: np.zeros(len(samples.points), bool))
     walked = bake(scene, target, **kwargs)[0]
     known = np.concatenate(reached)
     print("samples reached from their centre", known.sum(), "of", len(known))
