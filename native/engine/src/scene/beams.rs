@@ -8,8 +8,8 @@
 use crate::mesh::Vec3;
 use crate::rasterizer::{cross, dot};
 
-use super::clusters::NO_CHILD;
-use super::segments::Segments;
+use super::affine::Affine;
+use super::segments::{Segments, Shape};
 
 /// Most corners a lamp polygon may have.
 pub const MAX_CORNERS: usize = 8;
@@ -128,49 +128,23 @@ impl Segments<'_> {
     /// Conservative: false may still be clear.
     pub fn beam_clear(&self, apex: Vec3, normal: Vec3, polygon: &[Vec3], offset: f32, stack: &mut Vec<u32>, inner: &mut Vec<u32>) -> bool {
         let Some(world) = Pyramid::new(apex, normal, polygon, offset) else { return false };
-        if self.top.nodes.is_empty() {
-            return true;
-        }
-        stack.clear();
-        stack.push(0);
-        while let Some(n) = stack.pop() {
-            if world.separates_box(&self.top_bounds[n as usize]) {
-                continue;
-            }
-            let node = self.top.nodes[n as usize];
-            if node.children[0] != NO_CHILD {
-                stack.extend_from_slice(&node.children);
-            } else if !self.instance_clear(&world, node.instance as usize, inner) {
-                return false;
-            }
-        }
-        true
+        !self.any_touches(&world, stack, inner)
+    }
+}
+
+impl Shape for Pyramid {
+    fn in_mesh(&self, place: &Affine, _: &([Vec3; 3], Vec3)) -> Self {
+        self.to_mesh(&place.linear, &place.inverse, place.translation)
     }
 
-    fn instance_clear(&self, world: &Pyramid, i: usize, stack: &mut Vec<u32>) -> bool {
-        let (mesh, place) = &self.instances[i];
-        let (tree, positions) = (self.trees[*mesh as usize], self.positions[*mesh as usize]);
-        let local = world.to_mesh(&place.linear, &place.inverse, place.translation);
-        stack.clear();
-        stack.push(0);
-        while let Some(n) = stack.pop() {
-            let n = n as usize;
-            if local.separates_box(&tree.bounds[n]) {
-                continue;
-            }
-            let node = tree.nodes[n];
-            if node.children[0] != NO_CHILD {
-                stack.extend_from_slice(&node.children);
-                continue;
-            }
-            let leaf = &tree.leaves[node.leaf as usize];
-            for tri in &leaf.triangles {
-                if !local.separates(&tri.map(|k| positions[leaf.vertices[k as usize] as usize])) {
-                    return false;
-                }
-            }
-        }
-        true
+    #[inline(always)]
+    fn may_touch_box(&self, b: &[Vec3; 2]) -> bool {
+        !self.separates_box(b)
+    }
+
+    #[inline(always)]
+    fn touches(&self, corners: [Vec3; 3]) -> bool {
+        !self.separates(&corners)
     }
 }
 

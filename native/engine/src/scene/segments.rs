@@ -113,37 +113,39 @@ impl<'a> Segments<'a> {
             return false;
         }
         let trim = offset / length;
-        let world = Segment { origin: point, delta, t0: trim, t1: 1.0 - trim };
+        self.any_touches(&Segment { origin: point, delta, t0: trim, t1: 1.0 - trim }, stack, &mut Vec::new())
+    }
+
+    /// Whether any triangle of the scene touches `world` (top tree of instance boxes, then each
+    /// mesh's node boxes in mesh space, then its leaf triangles); stops at the first.
+    pub(super) fn any_touches<S: Shape>(&self, world: &S, stack: &mut Vec<u32>, inner: &mut Vec<u32>) -> bool {
         if self.top.nodes.is_empty() {
             return false;
         }
         stack.clear();
         stack.push(0);
-        let mut inner = Vec::new();
         while let Some(n) = stack.pop() {
-            if !world.hits_box(&self.top_bounds[n as usize]) {
+            if !world.may_touch_box(&self.top_bounds[n as usize]) {
                 continue;
             }
             let node = self.top.nodes[n as usize];
             if node.children[0] != NO_CHILD {
                 stack.extend_from_slice(&node.children);
-            } else if self.instance(&world, node.instance as usize, &mut inner) {
+            } else if self.instance_touches(&world.in_mesh(&self.instances[node.instance as usize].1, &self.inverses[node.instance as usize]), node.instance as usize, inner) {
                 return true;
             }
         }
         false
     }
 
-    fn instance(&self, world: &Segment, i: usize, stack: &mut Vec<u32>) -> bool {
+    fn instance_touches<S: Shape>(&self, local: &S, i: usize, stack: &mut Vec<u32>) -> bool {
         let mesh = self.instances[i].0 as usize;
         let (tree, positions) = (self.trees[mesh], self.positions[mesh]);
-        let (inv, shift) = &self.inverses[i];
-        let local = Segment { origin: apply(inv, sub(world.origin, *shift)), delta: apply(inv, world.delta), ..*world };
         stack.clear();
         stack.push(0);
         while let Some(n) = stack.pop() {
             let n = n as usize;
-            if !local.hits_box(&tree.bounds[n]) {
+            if !local.may_touch_box(&tree.bounds[n]) {
                 continue;
             }
             let node = tree.nodes[n];
@@ -153,12 +155,37 @@ impl<'a> Segments<'a> {
             }
             let leaf = &tree.leaves[node.leaf as usize];
             for tri in &leaf.triangles {
-                let [a, b, c] = tri.map(|k| positions[leaf.vertices[k as usize] as usize]);
-                if local.hits_triangle(a, b, c) {
+                if local.touches(tri.map(|k| positions[leaf.vertices[k as usize] as usize])) {
                     return true;
                 }
             }
         }
         false
+    }
+}
+
+/// What `Segments::any_touches` looks for: a shape in world space, movable into a mesh's.
+pub(super) trait Shape {
+    /// The shape in an instance's mesh space (`place`: mesh to world; `inverse`: its inverse
+    /// linear part, rows, and the translation).
+    fn in_mesh(&self, place: &Affine, inverse: &([Vec3; 3], Vec3)) -> Self;
+    /// False only where the shape surely misses the box.
+    fn may_touch_box(&self, b: &[Vec3; 2]) -> bool;
+    fn touches(&self, corners: [Vec3; 3]) -> bool;
+}
+
+impl Shape for Segment {
+    fn in_mesh(&self, _: &Affine, (inv, shift): &([Vec3; 3], Vec3)) -> Self {
+        Segment { origin: apply(inv, sub(self.origin, *shift)), delta: apply(inv, self.delta), ..*self }
+    }
+
+    #[inline(always)]
+    fn may_touch_box(&self, b: &[Vec3; 2]) -> bool {
+        self.hits_box(b)
+    }
+
+    #[inline(always)]
+    fn touches(&self, [a, b, c]: [Vec3; 3]) -> bool {
+        self.hits_triangle(a, b, c)
     }
 }
