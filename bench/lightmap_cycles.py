@@ -235,9 +235,10 @@ def main(argv=None):
     parser.add_argument("--lamp", choices=("none",) + tuple(LAMPS), default="none")
     parser.add_argument("--ours-samples", type=int, default=4, help="our supersamples per texel")
     parser.add_argument("--uniform", action="store_true", help="ours with every sample in every texel (not adaptive)")
-    parser.add_argument("--repeat", type=int, default=3,
+    parser.add_argument("--repeat", type=int, default=7,
                         help="bake ours this many times: the best after the first is timed (the first "
-                             "builds one-off tables; Cycles' sweep runs after its reference, warm too)")
+                             "builds one-off tables; Cycles' sweep runs after its reference, warm too); "
+                             "bakes of a tenth of a second vary by half between runs, so six are timed")
     parser.add_argument("--sweep", default="", help="Cycles sample counts to time against ours, e.g. 16,64,256")
     parser.add_argument("--picture", default="", help="PNG: Cycles' map, ours, and the relative error (0-10 %%)")
     args = parser.parse_args(argv)
