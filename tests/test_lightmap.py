@@ -135,6 +135,27 @@ def test_box_on_a_plane_darkens_and_invalid_texels_are_filled():
     assert out["flat"][inside, 0].max() <= out["flat"][near, 0].max() + 1e-6
 
 
+def test_a_uniform_sky_takes_band_0_alone_and_lights_the_same():
+    """Trailing bands of zeros are dropped (`light.bands_used`); a plain World colour, band 0
+    alone, skips the rotation into each receiver's frame and lights exactly as the same sky
+    carried through every band (a 1e-30 in band 4 keeps them)."""
+    assert lm.light.bands_used(uniform_sky(bands=5)) == 1
+    sky = uniform_sky(bands=5)
+    sky[5] = 0.3
+    assert lm.light.bands_used(sky) == 3 and lm.light.bands_used(np.zeros((25, 3))) == 0
+    v, t, uv = grid_plane(size=2.0, n=2)
+    scene, (mid, _) = scene_of((v, t), cube([-0.2, -0.5, 0], [0.2, 0.5, 0.6]))
+    target = [Target(Surface(mid, v, t), uv)]
+    kwargs = dict(resolution=16, bounces=0, margin=0, basis="sh")
+    plain = uniform_sky(bands=5) * [1.0, 0.8, 0.6]
+    carried = plain.copy()
+    carried[20] = 1e-30
+    a = bake(scene, target, lighting=plain, **kwargs)[0]
+    b = bake(scene, target, lighting=carried, **kwargs)[0]
+    for name in ("flat", "sh0", "sh1", "sh2", "sh3", "ao"):
+        assert np.abs(a[name] - b[name]).max() < 1e-5, name
+
+
 def test_samples_reached_from_a_valid_centre_are_valid(monkeypatch):
     """Refined samples that a clear segment joins to their texel's valid centre, and centres
     joined so to a valid centre two texels away at most, skip the validity walk: the same
