@@ -405,6 +405,7 @@ def test_sun_penumbra_against_ray_casting():
           "signed", (ours - reference)[penumbra].mean())
     assert penumbra.sum() > 20
     assert error.mean() < 0.04  # 0.027 (one ray per sample); 0.071 with patterns tied to places
+    assert error.max() < 0.11  # 0.07-0.08; 0.14 tied
 
 
 def test_adaptive_sun_rays_match_a_ray_per_sample(monkeypatch):

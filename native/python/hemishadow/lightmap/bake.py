@@ -116,8 +116,8 @@ class Steps:
 
 def direct_light(scene, points, ng, lobes, lighting, suns, index, offsets, want_sh, offset, progress, masks=None,
             exact_suns=True, texel_grid=None, lamps=(), lamp_points=16):
-    """Direct light (P, L, 3), ao (P,), L1 SH (P, 4, 3) or None, for samples; `masks` (P, 16)
-    are their raw visibility masks when already known (unpacked a chunk at a time: 1 KiB a
+    """Direct light (P, L, 3), ao (P,), L1 SH (P, 4, 3) or None, and whether each sun reaches
+    each sample (P, S), for samples; `masks` (P, 16) are their raw visibility masks when already known (unpacked a chunk at a time: 1 KiB a
     sample unpacked, 128 bytes packed). texel_grid: (texel ids (P,), grid shape (T, R, R))
     for adaptive sun rays (`_sun_lit`), None for a ray per sample."""
     p = len(points)
@@ -127,14 +127,15 @@ def direct_light(scene, points, ng, lobes, lighting, suns, index, offsets, want_
     maps = np.zeros(lobes.shape[:2] + (3,), np.float32)
     ao = np.ones(p, np.float32)
     sh = np.zeros((p, 4, 3), np.float32) if want_sh else None
+    sun_lit = np.zeros((p, len(suns)), np.float32)
     for s in progress.chunks(p):
         m, a, h = light.environment(masks[s], t[s], b[s], ng[s], lobes[s], lighting, want_sh)
         maps[s], ao[s] = m, a
         if want_sh:
             sh[s] = h
-    for sun in suns:
+    for k, sun in enumerate(suns):
         dirs = light.sun_directions(sun, p, index, offsets)
-        lit = np.zeros(p, np.float32)
+        lit = sun_lit[:, k]
         facing = (dirs * ng).sum(1) > 0  # below the horizon: no ray needed
         progress.check()
         if facing.any() and texel_grid is not None:
@@ -154,7 +155,7 @@ def direct_light(scene, points, ng, lobes, lighting, suns, index, offsets, want_
             maps[s] += m
             if want_sh:
                 sh[s] += h
-    return maps, ao, sh
+    return maps, ao, sh, sun_lit
 
 
 def _sun_rays(scene, points, ng, dirs, offset, progress, exact=True):
@@ -340,7 +341,7 @@ class _Samples:
     `target`, its texel in the target's map (`texel`) and in the bake's (layers, R, R) grid
     (`cell`), whether that texel's centre lies in a UV triangle (`covered`), whether its
     triangle has a normal (`usable`: zero-area ones take the shading normal). Once lit
-    (`_light`), also `valid`, `maps`, `ao` and `sh`."""
+    (`_light`), also `valid`, `maps`, `ao`, `sh` and `sun` (1 where each sun reaches it)."""
     points: np.ndarray
     ng: np.ndarray
     t: np.ndarray
@@ -358,6 +359,7 @@ class _Samples:
     maps: np.ndarray = None
     ao: np.ndarray = None
     sh: np.ndarray = None
+    sun: np.ndarray = None
 
     @classmethod
     def of(cls, geo, sizes, atlas, basis):
@@ -395,9 +397,9 @@ def _light(scene, samples, offsets, *, lighting, suns, lamps, lamp_points, want_
     masks, valid = _masks_and_valid(scene, samples.points, samples.ng, offset, steps, known_valid)
     valid &= samples.usable
     grid = (samples.cell, samples.shape) if adaptive_suns else None
-    maps, ao, sh = direct_light(scene, samples.points, samples.ng, samples.lobes, lighting, suns, samples.index, offsets,
+    maps, ao, sh, sun_lit = direct_light(scene, samples.points, samples.ng, samples.lobes, lighting, suns, samples.index, offsets,
                                 want_sh, offset, steps, masks, texel_grid=grid, lamps=lamps, lamp_points=lamp_points)
-    return replace(samples, valid=valid, maps=maps, ao=ao, sh=sh if want_sh else None)
+    return replace(samples, valid=valid, maps=maps, ao=ao, sh=sh if want_sh else None, sun=sun_lit)
 
 
 def _refined(scene, centres, full, offsets, contrast, steps, light_args, finer=None):
@@ -425,7 +427,7 @@ def _refined(scene, centres, full, offsets, contrast, steps, light_args, finer=N
     refined = _light(scene, refined, offsets, known_valid=_reached_from_centres(scene, lit, refined, light_args["offset"]),
                      **light_args)
     if finer is not None and light_args["suns"]:
-        edges = _sun_edges(scene, refined, offsets, light_args["suns"], light_args["offset"], centres.shape, steps)
+        edges = _sun_edges(refined, centres.shape)
         if edges.any():
             extra, extra_offsets = finer(edges.reshape(centres.shape))
             steps.total += 2 * len(extra.points)
@@ -485,21 +487,14 @@ def _edge_sampler(targets, sizes, atlas, basis, samples, check):
     return finer
 
 
-def _sun_edges(scene, samples, offsets, suns, offset, shape, steps):
-    """(layers * R * R,) bool: texels (of the grid `shape`) whose valid samples disagree on
-    whether a sun reaches them (one ray each, as `direct_light` casts them), or agree but
-    not with a side neighbour's (the edge runs between their samples): a hard shadow edge,
-    which a few samples cut coarsely. Soft light (sky, lamps with a size) varies within a
-    texel too, but smoothly: there the samples' mean is good."""
-    lit = np.zeros((len(samples.points), len(suns)), np.float32)
-    for k, sun in enumerate(suns):
-        dirs = light.sun_directions(sun, len(samples.points), samples.index, offsets)
-        facing = (dirs * samples.ng).sum(1) > 0
-        if facing.any():
-            lit[facing, k] = _sun_rays(scene, samples.points[facing], samples.ng[facing], dirs[facing], offset, steps)
-    cells_count = int(np.prod(shape))
-    edges = refinement.disagreeing(samples.cell, samples.valid, lit, cells_count)
-    return edges | refinement.differs_from_a_neighbour(samples.cell, samples.valid, lit, shape)
+def _sun_edges(samples, shape):
+    """(layers * R * R,) bool: texels (of the grid `shape`) whose valid samples (lit) disagree
+    on whether a sun reaches them (`sun`: the rays `direct_light` cast), or agree but not with
+    a side neighbour's (the edge runs between their samples): a hard shadow edge, which a
+    few samples cut coarsely. Soft light (sky, lamps with a size) varies within a texel too,
+    but smoothly: there the samples' mean is good."""
+    edges = refinement.disagreeing(samples.cell, samples.valid, samples.sun, int(np.prod(shape)))
+    return edges | refinement.differs_from_a_neighbour(samples.cell, samples.valid, samples.sun, shape)
 
 
 def _targets_and_sizes(targets, resolution):

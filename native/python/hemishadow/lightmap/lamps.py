@@ -164,9 +164,7 @@ def _sampled(lamp, receivers, index, offsets, points):
         return pts, w, d2, cos_lamp * np.float32(radiance * area / count)
     factor = np.full(d2.shape, 1.0 / (4 * np.pi * count), np.float32)
     if isinstance(lamp, Spot):
-        axis = receivers - np.asarray(lamp.position, np.float32)
-        axis /= np.maximum(np.linalg.norm(axis, axis=1, keepdims=True), 1e-30)
-        factor *= spot_mask(lamp, axis).astype(np.float32)[:, None]
+        factor *= spot_mask(lamp, _away(lamp, receivers)).astype(np.float32)[:, None]
     return pts, w, d2, factor
 
 
@@ -175,9 +173,8 @@ def _area_points(lamp, offsets, points):
     uv = _patterns(offsets, points, True)
     if lamp.shape in ("DISK", "ELLIPSE"):
         uv = _disk(uv) * 0.5 + 0.5
-    v_axis = np.cross(lamp.direction, lamp.axis_u)  # local +Y (local -Z x local +X = +Y)
     local = (uv - 0.5) * [lamp.size, lamp.size_y]
-    axes = np.array([lamp.axis_u, v_axis], np.float64)  # (2, 3): the lamp's +X and +Y
+    axes = np.array([lamp.axis_u, _axis_v(lamp)], np.float64)  # (2, 3): the lamp's +X and +Y
     table = np.einsum("knj,jd->knd", local, axes) + np.asarray(lamp.position, np.float64)
     return table.astype(np.float32), uv.shape[1]
 
@@ -188,11 +185,26 @@ def _point_points(lamp, receivers, index, offsets, points):
     position = np.asarray(lamp.position, np.float32)
     if lamp.radius <= 0:
         return np.broadcast_to(position, (len(receivers), 1, 3)), 1
-    axis = receivers - position
-    axis /= np.maximum(np.linalg.norm(axis, axis=1, keepdims=True), 1e-30)
-    t, b = (f.astype(np.float32) for f in cells.engine_frame(axis))
+    t, b = _facing_frame(lamp, receivers)
     d = disk.astype(np.float32)[index]
     return position + d[..., :1] * t[:, None] + d[..., 1:] * b[:, None], disk.shape[1]
+
+
+def _axis_v(lamp):
+    """An area lamp's local +Y in world space (local -Z x local +X = +Y)."""
+    return np.cross(lamp.direction, lamp.axis_u)
+
+
+def _away(lamp, receivers):
+    """Unit directions (P, 3) float32 from a point or spot lamp to each receiver (P, 3)."""
+    axis = np.asarray(receivers, np.float32) - np.asarray(lamp.position, np.float32)
+    return axis / np.maximum(np.linalg.norm(axis, axis=1, keepdims=True), 1e-30)
+
+
+def _facing_frame(lamp, receivers):
+    """Tangent and bitangent (P, 3) float32 of the disk of a point or spot lamp facing each
+    receiver: the engine's frame about the direction from the lamp."""
+    return tuple(f.astype(np.float32) for f in cells.engine_frame(_away(lamp, receivers)))
 
 
 def spot_mask(lamp, axis):
@@ -254,13 +266,10 @@ def _polygon(lamp, receivers):
     around the disk of a point or spot lamp facing each receiver, (P, 4, 3)."""
     square = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]], np.float32) / 2
     if isinstance(lamp, Area):
-        v_axis = np.cross(lamp.direction, lamp.axis_u)
-        axes = np.array([lamp.axis_u * lamp.size, v_axis * lamp.size_y], np.float32)
+        axes = np.array([lamp.axis_u * lamp.size, _axis_v(lamp) * lamp.size_y], np.float32)
         return np.asarray(lamp.position, np.float32) + np.einsum("kj,jd->kd", square, axes)  # einsum: see `_sampled`
     position = np.asarray(lamp.position, np.float32)
-    axis = receivers - position
-    axis /= np.maximum(np.linalg.norm(axis, axis=1, keepdims=True), 1e-30)
-    t, b = (f.astype(np.float32) for f in cells.engine_frame(axis))
+    t, b = _facing_frame(lamp, receivers)
     corners = 2 * lamp.radius * square  # the disk of radius r inside the square of side 2 r
     return position + corners[None, :, :1] * t[:, None] + corners[None, :, 1:] * b[:, None]
 

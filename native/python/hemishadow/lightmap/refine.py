@@ -68,7 +68,6 @@ def texels_to_refine(values, usable, contrast=CONTRAST, full=None, least=None):
     return refine
 
 
-
 def disagreeing(cell, valid, values, cells):
     """(cells,) bool: texels whose valid samples' `values` (P, C) (`cell` (P,): each sample's
     texel) are not all the same."""

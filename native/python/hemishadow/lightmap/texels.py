@@ -28,7 +28,7 @@ class Texels:
     island: np.ndarray     # (R, R) bool: texels with at least one sample
     index: np.ndarray      # (S,) int64: which of the texel's sample positions (0 for rim samples)
     overlapping: int       # samples strictly inside more than one triangle (overlapping UVs)
-    light: np.ndarray = None  # (S,) int64: the pattern each sample sees suns and lamps by (`light_patterns`)
+    light: np.ndarray      # (S,) int64: the pattern each sample sees suns and lamps by (`light_patterns`)
 
 
 def offsets(samples):
