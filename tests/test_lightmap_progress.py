@@ -50,7 +50,7 @@ def test_every_stage_reports_within_a_fifth_of_a_second(atlas):
     gaps = np.diff(stamps)
     worst = int(np.argmax(gaps))
     print(f"{len(stamps) - 2} reports, worst gap {gaps[worst]:.3f} s CPU: {stages[worst]} -> {stages[worst + 1]}")
-    for stage in ("rasterize", "_masks_and_valid", "direct_light", "_sun_rays", "_record", "_gather_some",
+    for stage in ("rasterize", "_masks_and_valid", "environment_light", "_sun_rays", "_record", "_gather_some",
                   "fill", "stitch"):
         assert stage in stages, stage                          # every stage reports
     assert gaps.max() < LIMIT

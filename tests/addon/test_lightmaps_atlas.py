@@ -119,7 +119,8 @@ def remapped(atlas, alone, obj):
 def test_atlas_reads_what_each_object_baked_alone_reads(scene, tmp_path):
     """Two planes, one under a floating box (a soft shadow), baked into the atlas and each
     alone at the same texel density: the alone maps, remapped through the slots, agree with
-    the atlas to 2 % of the open sky (texel centres fall elsewhere in the two layouts)."""
+    the atlas to 2.5 % of the open sky (texel centres fall elsewhere in the two layouts, and a
+    texel's sky light is a mean over its neighbours', lightmap/tilts.py)."""
     big = plane("Big", 4.0, (0, 0, 0))
     small = plane("Small", 2.0, (5, 0, 0))
     bpy.ops.mesh.primitive_cube_add(size=1.0, location=(0, 0, 0.8))
@@ -134,7 +135,7 @@ def test_atlas_reads_what_each_object_baked_alone_reads(scene, tmp_path):
             assert len(got) > 100
             worst[(obj.name, name)] = np.abs(got - want).max()
     print(worst)
-    assert max(worst.values()) < 0.02
+    assert max(worst.values()) < 0.025
     dark = lm.read_exr(alone["Big"])["flat"].min()
     assert dark < 0.8                                             # the shadow is there to be matched
 

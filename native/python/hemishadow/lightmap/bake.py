@@ -18,7 +18,7 @@ import numpy as np
 from .. import Cancelled
 from . import basis as frames
 from . import atlas as atlases
-from . import bounce, cells, dilate, geometry, lamps as lamp_models, light, seams, sparse_gather, texels
+from . import bounce, cells, dilate, geometry, lamps as lamp_models, light, seams, sparse_gather, texels, tilts
 from . import refine as refinement
 from .geometry import Surface, Target
 
@@ -115,24 +115,44 @@ class Steps:
 
 
 def direct_light(scene, points, ng, lobes, lighting, suns, index, offsets, want_sh, offset, progress, masks=None,
-            exact_suns=True, texel_grid=None, lamps=(), lamp_points=16):
+                 exact_suns=True, texel_grid=None, lamps=(), lamp_points=16):
     """Direct light (P, L, 3), ao (P,), L1 SH (P, 4, 3) or None, and whether each sun reaches
-    each sample (P, S), for samples; `masks` (P, 16) are their raw visibility masks when already known (unpacked a chunk at a time: 1 KiB a
-    sample unpacked, 128 bytes packed). texel_grid: (texel ids (P,), grid shape (T, R, R))
-    for adaptive sun rays (`_sun_lit`), None for a ray per sample."""
-    p = len(points)
+    each sample (P, S): `environment_light` plus `sun_and_lamp_light`. `masks` (P, 16):
+    the samples' raw visibility masks when already known."""
     if masks is None:
         masks = scene.visibility(points, ng, offset=offset)
+    maps, ao, sh = environment_light(masks, ng, lobes, lighting, want_sh, progress)
+    more, more_sh, sun_lit = sun_and_lamp_light(scene, points, ng, lobes, suns, index, offsets, want_sh, offset, progress,
+                                                exact_suns, texel_grid, lamps, lamp_points)
+    return maps + more, ao, (sh + more_sh if want_sh else None), sun_lit
+
+
+def environment_light(masks, ng, lobes, lighting, want_sh, progress):
+    """The environment's light (P, L, 3), ao (P,) and L1 SH (P, 4, 3) or None at samples
+    with geometric normals `ng` and raw masks (P, 16), read in the frame of `ng` a chunk at
+    a time (1 KiB a sample unpacked)."""
+    p = len(masks)
     t, b = cells.engine_frame(ng)
     maps = np.zeros(lobes.shape[:2] + (3,), np.float32)
     ao = np.ones(p, np.float32)
     sh = np.zeros((p, 4, 3), np.float32) if want_sh else None
-    sun_lit = np.zeros((p, len(suns)), np.float32)
     for s in progress.chunks(p):
         m, a, h = light.environment(masks[s], t[s], b[s], ng[s], lobes[s], lighting, want_sh)
         maps[s], ao[s] = m, a
         if want_sh:
             sh[s] = h
+    return maps, ao, sh
+
+
+def sun_and_lamp_light(scene, points, ng, lobes, suns, index, offsets, want_sh, offset, progress, exact_suns=True,
+                       texel_grid=None, lamps=(), lamp_points=16):
+    """The light of suns and lamps (P, L, 3), its L1 SH (P, 4, 3) (zeros without want_sh), and
+    whether each sun reaches each sample (P, S). texel_grid: (texel ids (P,), grid shape
+    (T, R, R)) for adaptive sun rays (`_sun_lit`), None for a ray per sample."""
+    p = len(points)
+    maps = np.zeros(lobes.shape[:2] + (3,), np.float32)
+    sh = np.zeros((p, 4, 3), np.float32)
+    sun_lit = np.zeros((p, len(suns)), np.float32)
     for k, sun in enumerate(suns):
         dirs = light.sun_directions(sun, p, index, offsets)
         lit = sun_lit[:, k]
@@ -155,7 +175,7 @@ def direct_light(scene, points, ng, lobes, lighting, suns, index, offsets, want_
             maps[s] += m
             if want_sh:
                 sh[s] += h
-    return maps, ao, sh, sun_lit
+    return maps, sh, sun_lit
 
 
 def _sun_rays(scene, points, ng, dirs, offset, progress, exact=True):
@@ -194,8 +214,9 @@ def _sun_lit(scene, points, ng, dirs, texel_id, shape, offset, progress=None):
 
 
 def _sample_geometry(target, resolution, samples, check=None, only=None):
-    """Texels of a target and, per sample, world position, geometric normal, lobes' frame;
-    `only` (R * R,) bool: those texels' samples only (`texels.rasterize`)."""
+    """Texels of a target and, per sample, world position, geometric normal, lobes' frame and
+    a texel's world size; `only` (R * R,) bool: those texels' samples only
+    (`texels.rasterize`)."""
     pos, ng, normals, tangents, uv, tris = geometry.target_corners(target)
     check = check or (lambda: None)
     tx = texels.rasterize(uv, resolution, samples, check, only)
@@ -211,7 +232,16 @@ def _sample_geometry(target, resolution, samples, check=None, only=None):
     check()
     t, b, n = frames.tangent_frames(np.einsum("pkj,pk->pj", normals[tx.triangle], w),
                                     np.einsum("pkj,pk->pj", tangents[tx.triangle], w))
-    return tx, points, ng[tx.triangle], (t, b, n), tris, uv
+    return tx, points, ng[tx.triangle], (t, b, n), _texel_spacing(pos, uv, resolution)[tx.triangle], tris, uv
+
+
+def _texel_spacing(pos, uv, resolution):
+    """(K,): the world size of a texel on each triangle (corners `pos` (K, 3, 3), `uv`
+    (K, 3, 2)), the square root of its world area over its area in texels."""
+    world = np.linalg.norm(np.cross(pos[:, 1] - pos[:, 0], pos[:, 2] - pos[:, 0]), axis=1)
+    e1, e2 = (uv[:, 1] - uv[:, 0]) * resolution, (uv[:, 2] - uv[:, 0]) * resolution
+    in_texels = np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+    return np.sqrt(world / np.maximum(in_texels, 1e-300))
 
 
 def _texel_maps(texel, resolution, values, valid):
@@ -292,6 +322,8 @@ def bake(scene, targets, *, resolution, lighting=None, suns=(), lamps=(), surfac
     if not len(full.points):
         raise ValueError(f"the lightmap UVs cover no texel of the {max(sizes)} x {max(sizes)} map: "
                          "nothing to bake")
+    if samples == 1:  # one sample a texel, nothing to average its mask's turn with (`tilts.py`)
+        full = replace(full, tilt=np.full(len(full.tilt), -1))
     centres = None
     if adaptive and samples > 1:
         centres = _Samples.of([_sample_geometry(tg, r, 1, setup.check) for tg, r in zip(targets, sizes)], sizes,
@@ -340,8 +372,11 @@ class _Samples:
     the texel, permuted per texel by `texels.light_patterns`), its
     `target`, its texel in the target's map (`texel`) and in the bake's (layers, R, R) grid
     (`cell`), whether that texel's centre lies in a UV triangle (`covered`), whether its
-    triangle has a normal (`usable`: zero-area ones take the shading normal). Once lit
-    (`_light`), also `valid`, `maps`, `ao`, `sh` and `sun` (1 where each sun reaches it)."""
+    triangle has a normal (`usable`: zero-area ones take the shading normal), the direction
+    its mask tilts to (`tilt`, `tilts.py`) and a texel's world size there (`spacing`). Once lit
+    (`_light`), also `valid`, `maps`, `ao`, `sh`, `sun` (1 where each sun reaches it) and
+    `environment` (P, C): the environment's share of maps and sh, and ao, as the bake's
+    value rows."""
     points: np.ndarray
     ng: np.ndarray
     t: np.ndarray
@@ -354,12 +389,15 @@ class _Samples:
     cell: np.ndarray
     covered: np.ndarray
     usable: np.ndarray
+    tilt: np.ndarray
+    spacing: np.ndarray
     shape: tuple
     valid: np.ndarray = None
     maps: np.ndarray = None
     ao: np.ndarray = None
     sh: np.ndarray = None
     sun: np.ndarray = None
+    environment: np.ndarray = None
 
     @classmethod
     def of(cls, geo, sizes, atlas, basis):
@@ -379,7 +417,8 @@ class _Samples:
             cell, layers = (target * r + texel // size) * r + texel % size, len(geo)
         covered = np.concatenate([g[0].coverage.reshape(-1)[g[0].texel] for g in geo])
         return cls(np.concatenate([g[1] for g in geo]), ng, t, b, n, lobes, np.concatenate([g[0].light for g in geo]),
-                   target, texel, cell, covered, usable, (layers, r, r))
+                   target, texel, cell, covered, usable, np.concatenate([g[0].tilt for g in geo]),
+                   np.concatenate([g[4] for g in geo]), (layers, r, r))
 
     def take(self, keep):
         return replace(self, **{f.name: getattr(self, f.name)[keep] for f in fields(self)
@@ -392,14 +431,22 @@ class _Samples:
 
 def _light(scene, samples, offsets, *, lighting, suns, lamps, lamp_points, want_sh, offset, steps, adaptive_suns=False,
            known_valid=None):
-    """The samples lit by direct light: `valid` (inside solid geometry or not), `maps`, `ao`, `sh`;
-    `known_valid` (P,) bool: samples known to be valid (`_reached_from_centres`)."""
-    masks, valid = _masks_and_valid(scene, samples.points, samples.ng, offset, steps, known_valid)
+    """The samples lit by direct light: `valid` (inside solid geometry or not), `maps`, `ao`, `sh`,
+    `environment` (the environment's share, `_Samples`), each mask taken through its tilted
+    lattice (`tilts.py`); `known_valid` (P,) bool: samples known to be valid
+    (`_reached_from_centres`)."""
+    tilted = tilts.tilted_normals(samples.ng, samples.tilt)  # masks through a turned lattice, read unturned
+    masks, valid = _masks_and_valid(scene, samples.points, tilted, offset, steps, known_valid)
     valid &= samples.usable
+    maps, ao, sh = environment_light(masks, samples.ng, samples.lobes, lighting, want_sh, steps)
+    environment = np.concatenate([maps.reshape(len(ao), -1)] + ([sh.reshape(len(ao), -1)] if want_sh else [])
+                                 + [ao[:, None]], axis=1)
     grid = (samples.cell, samples.shape) if adaptive_suns else None
-    maps, ao, sh, sun_lit = direct_light(scene, samples.points, samples.ng, samples.lobes, lighting, suns, samples.index, offsets,
-                                want_sh, offset, steps, masks, texel_grid=grid, lamps=lamps, lamp_points=lamp_points)
-    return replace(samples, valid=valid, maps=maps, ao=ao, sh=sh if want_sh else None, sun=sun_lit)
+    more, more_sh, sun_lit = sun_and_lamp_light(scene, samples.points, samples.ng, samples.lobes, suns, samples.index,
+                                                offsets, want_sh, offset, steps, texel_grid=grid, lamps=lamps,
+                                                lamp_points=lamp_points)
+    return replace(samples, valid=valid, maps=maps + more, ao=ao, sh=sh + more_sh if want_sh else None, sun=sun_lit,
+                   environment=environment)
 
 
 def _refined(scene, centres, full, offsets, contrast, steps, light_args, finer=None):
@@ -409,6 +456,7 @@ def _refined(scene, centres, full, offsets, contrast, steps, light_args, finer=N
     their offsets) where those samples disagree on a sun (`_sun_edges`); one set of samples
     per texel."""
     lit = _lit_centres(scene, centres, light_args)
+    lit = _smoothed_environment(lit, lit.valid)
     cells_count = int(np.prod(centres.shape))
     values = np.zeros((cells_count, lit.maps[0].size + 1), np.float32)
     values[lit.cell] = np.concatenate([lit.maps.reshape(len(lit.ao), -1), lit.ao[:, None]], axis=1)
@@ -435,6 +483,21 @@ def _refined(scene, centres, full, offsets, contrast, steps, light_args, finer=N
             refined = refined.take(~edges[refined.cell]).joined(_light(scene, extra, extra_offsets, known_valid=reached,
                                                                        **light_args))
     return lit.take(~refine[lit.cell]).joined(refined)
+
+
+def _smoothed_environment(lit, smooth):
+    """`lit` (a sample per texel) with the environment light of the samples `smooth` (P,)
+    bool tent-filtered over theirs and their smooth neighbours' (`tilts.smoothed`: the four
+    tilted lattices averaged)."""
+    if not smooth.any():
+        return lit
+    grid = sparse_gather.Grid(lit.cell, lit.valid, lit.shape)
+    environment = tilts.smoothed(lit.environment, grid, lit.points, lit.ng, lit.spacing, lit.target, smooth)
+    change = environment - lit.environment
+    size = lit.maps[0].size
+    maps = lit.maps + change[:, :size].reshape(lit.maps.shape)
+    sh = None if lit.sh is None else lit.sh + change[:, size:size + lit.sh[0].size].reshape(lit.sh.shape)
+    return replace(lit, maps=maps, sh=sh, ao=lit.ao + change[:, -1], environment=environment)
 
 
 def _lit_centres(scene, centres, light_args):

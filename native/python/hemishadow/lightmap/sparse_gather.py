@@ -55,7 +55,7 @@ _NEIGHBOURS = {(1, 0): ((-1, 0), (1, 0), (-1, 0), (1, 0)),
                (1, 1): ((-1, -1), (-1, 1), (1, -1), (1, 1))}
 
 
-class _Grid:
+class Grid:
     """Receivers on the texel grid: their rows and columns, and the valid receiver of each cell."""
 
     def __init__(self, cell, valid, shape):
@@ -82,7 +82,7 @@ def gather(gather_at, coefficients, points, normals, valid, cell, shape, steps=N
     invalid ones get zeros. steps: a `bake.Steps` chunking the gathers, stepped by `weight`
     per receiver. floor (N, 3): the least band 0 each receiver's error is measured against
     (the bake gives its direct light, in band-0 units: an error is seen against the total)."""
-    grid = _Grid(cell, valid, shape)
+    grid = Grid(cell, valid, shape)
     out = np.zeros((len(cell), coefficients, 3), np.float32)
     distance = np.full(len(cell), np.inf, np.float32)
     if steps is not None:

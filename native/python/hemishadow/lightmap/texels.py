@@ -15,6 +15,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import tilts
+
 _CANDIDATES_PER_CHUNK = 1 << 17  # about 0.05 s each: a cancel waits no longer
 _EPS = 1e-9
 
@@ -29,6 +31,7 @@ class Texels:
     index: np.ndarray      # (S,) int64: which of the texel's sample positions (0 for rim samples)
     overlapping: int       # samples strictly inside more than one triangle (overlapping UVs)
     light: np.ndarray      # (S,) int64: the pattern each sample sees suns and lamps by (`light_patterns`)
+    tilt: np.ndarray       # (S,) int64: the direction its visibility mask tilts to (`tilts.classes`)
 
 
 def offsets(samples):
@@ -69,15 +72,19 @@ def _mixed(x):
     return x ^ (x >> np.uint64(31))
 
 
-def _texel_keys(texel, triangle, tri, resolution):
-    """(S,) int64: a number per sample naming its texel the same wherever an atlas slot moves
-    the layout by whole texels: the texel's lowest triangle and its place relative to that
-    triangle's UV box (so a target bakes the same in an atlas as alone)."""
+def _texel_places(texel, triangle, tri, resolution):
+    """Per sample, its texel named the same wherever an atlas slot moves the layout by whole
+    texels: the texel's lowest triangle and its column and row relative to that triangle's
+    UV box, (S,) each (so a target bakes the same in an atlas as alone)."""
     first = np.full(resolution * resolution, np.iinfo(np.int64).max)
     np.minimum.at(first, texel, triangle)
     owner = first[texel]
     anchor = np.floor(tri.min(axis=1)).astype(np.int64)[owner]
-    dx, dy = texel % resolution - anchor[:, 0], texel // resolution - anchor[:, 1]
+    return owner, texel % resolution - anchor[:, 0], texel // resolution - anchor[:, 1]
+
+
+def _texel_keys(owner, dx, dy):
+    """(S,) int64: one number per texel place (`_texel_places`)."""
     return (owner * 4096 + dy) * 4096 + dx
 
 
@@ -222,6 +229,8 @@ def rasterize(uv, resolution, samples, check=None, only=None):
     island[texel] = True
     index = np.concatenate([index, np.zeros(len(t_cells), np.int64)])
     triangles = np.concatenate([tris, t_tris])
+    owner, dx, dy = _texel_places(texel, triangles, tri, r)
+    light = light_patterns(_texel_keys(owner, dx, dy), index, len(offs))
     return Texels(texel=texel, triangle=triangles, bary=np.concatenate([bary, t_bary]),
                   coverage=coverage.reshape(r, r), island=island.reshape(r, r), index=index,
-                  overlapping=int(overlapping), light=light_patterns(_texel_keys(texel, triangles, tri, r), index, len(offs)))
+                  overlapping=int(overlapping), light=light, tilt=tilts.classes(dx, dy, light))
