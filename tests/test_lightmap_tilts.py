@@ -15,7 +15,7 @@ hemishadow = pytest.importorskip("hemishadow")
 import trimesh  # noqa: E402
 from trimesh.ray.ray_pyembree import RayMeshIntersector  # noqa: E402
 
-from hemishadow.lightmap import Surface, Target, bake, cells, sparse_gather, tilts  # noqa: E402
+from hemishadow.lightmap import Surface, Target, bake, cells, sparse_gather, tent, tilts  # noqa: E402
 from test_lightmap import cube, grid_plane, scene_of, uniform_sky  # noqa: E402
 
 bake_module = importlib.import_module("hemishadow.lightmap.bake")  # `lm.bake` is the function
@@ -64,12 +64,12 @@ def test_smoothed_is_a_tent_that_stays_on_its_surface():
     spacing = np.full(36, 0.1)
     target = np.zeros(36, np.int64)
     grid = sparse_gather.Grid(cell, valid, shape)
-    out = tilts.smoothed(values, grid, points, normals, spacing, target, valid)
+    out = tent.smoothed(values, grid, points, normals, spacing, target, valid)
     v = values.reshape(6, 6, 2)
-    tent = np.outer([1, 2, 1], [1, 2, 1]) / 16
-    expected = (v[1:4, 1:4] * tent[..., None]).sum((0, 1))    # texel (2, 2): inside, the full tent
+    kernel = np.outer([1, 2, 1], [1, 2, 1]) / 16
+    expected = (v[1:4, 1:4] * kernel[..., None]).sum((0, 1))    # texel (2, 2): inside, the full tent
     assert np.allclose(out[2 * 6 + 2], expected, atol=1e-6)
-    corner = (v[:2, :2] * tent[1:, 1:, None]).sum((0, 1)) / tent[1:, 1:].sum()  # the map's corner: renormalised
+    corner = (v[:2, :2] * kernel[1:, 1:, None]).sum((0, 1)) / kernel[1:, 1:].sum()  # the map's corner: renormalised
     assert np.allclose(out[0], corner, atol=1e-6)
 
     use = valid.copy()
@@ -80,7 +80,7 @@ def test_smoothed_is_a_tent_that_stays_on_its_surface():
     far.reshape(6, 6, 3)[4:, :, 2] += 1.0                      # rows 4, 5: another island, a metre up
     folded = normals.copy()
     folded.reshape(6, 6, 3)[:, 0] = (1.0, 0.0, 0.0)            # column 0: a wall at 90 degrees
-    out = tilts.smoothed(values, grid, far, folded, spacing, other, use)
+    out = tent.smoothed(values, grid, far, folded, spacing, other, use)
     assert (out[3] == values[3]).all()
     for r in range(6):
         for c in range(6):

@@ -18,7 +18,7 @@ import numpy as np
 from .. import Cancelled
 from . import basis as frames
 from . import atlas as atlases
-from . import bounce, cells, dilate, geometry, lamps as lamp_models, light, seams, sparse_gather, texels, tilts
+from . import bounce, cells, dilate, geometry, lamps as lamp_models, light, seams, sparse_gather, tent, texels, tilts
 from . import refine as refinement
 from .geometry import Surface, Target
 
@@ -487,12 +487,12 @@ def _refined(scene, centres, full, offsets, contrast, steps, light_args, finer=N
 
 def _smoothed_environment(lit, smooth):
     """`lit` (a sample per texel) with the environment light of the samples `smooth` (P,)
-    bool tent-filtered over theirs and their smooth neighbours' (`tilts.smoothed`: the four
-    tilted lattices averaged)."""
+    bool tent-filtered over theirs and their smooth neighbours' (`tent.smoothed`: the four
+    turned lattices averaged, `tilts.py`)."""
     if not smooth.any():
         return lit
     grid = sparse_gather.Grid(lit.cell, lit.valid, lit.shape)
-    environment = tilts.smoothed(lit.environment, grid, lit.points, lit.ng, lit.spacing, lit.target, smooth)
+    environment = tent.smoothed(lit.environment, grid, lit.points, lit.ng, lit.spacing, lit.target, smooth)
     change = environment - lit.environment
     size = lit.maps[0].size
     maps = lit.maps + change[:, :size].reshape(lit.maps.shape)
@@ -596,8 +596,8 @@ def vertex_bounce(scene, receivers, lighting, suns, lamps, bounces, offset, step
 def _indirect(scene, receivers, lit, lighting, suns, lamps, bounces, offset, steps):
     """Gathered SH (P, 9, 3) of the light the samples `lit` (`_Samples` with their direct
     light) receive from the surfaces after `bounces` passes, once per texel, and at every
-    other texel where it is smooth against the texel's whole light (`sparse_gather`); None
-    when every surface is black."""
+    other texel where it is smooth against the texel's whole light (`sparse_gather`), then
+    tent-filtered (`tent.py`); None when every surface is black."""
     radiance = vertex_bounce(scene, receivers, lighting, suns, lamps, bounces, offset, steps)
     if not any(r.any() for r in radiance):
         steps.step(len(lit.points))
@@ -613,7 +613,9 @@ def _indirect(scene, receivers, lit, lighting, suns, lamps, bounces, offset, ste
     out = sparse_gather.gather(gather_at,
                                bounce.BANDS ** 2, points, ng, lit.valid[rep], lit.cell[rep], lit.shape, steps,
                                weight=len(lit.points) / max(len(rep), 1), floor=direct)
-    return out[of_sample]
+    grid = sparse_gather.Grid(lit.cell[rep], lit.valid[rep], lit.shape)
+    out = tent.smoothed(out.reshape(len(out), -1), grid, points, ng, lit.spacing[rep], lit.target[rep], lit.valid[rep])
+    return out.reshape(len(out), bounce.BANDS ** 2, 3)[of_sample]
 
 
 def _masks_and_valid(scene, points, ng, offset, steps=None, known_valid=None):

@@ -13,7 +13,7 @@ it were not turned (in the frame of the true normal): the scene is seen turned b
 one way or another. The direction comes from the parity of the texel's row and column (a
 2 x 2 pattern), turned on by the sample's light pattern, so that a texel's samples take each
 in turn. Texels lit at their centre alone (refinement found their light smooth) take the
-tent-filtered mean of their own and their neighbours' environment light (`smoothed`), where
+tent-filtered mean of their own and their neighbours' environment light (`tent.py`), where
 each direction weighs a quarter. Either way, a turn's first-order change cancels against its
 opposite's, and the cells' errors average over four lattices: a 4-degree blur of what the
 masks see, the anti-aliasing a single lattice lacks. An open plane stays exact (an open
@@ -33,15 +33,6 @@ from . import cells
 #: How far each sample's mask normal tilts from its geometric normal, in radians (about half
 #: the elevation a mask cell spans near the horizon).
 TILT = np.radians(4.0)
-
-#: Neighbours farther than this many texels (their world size at the texel) or whose normals
-#: part by more than 20 degrees are another island or across a fold: not averaged.
-_NEAR = 1.5
-_COS_NORMAL = np.cos(np.radians(20.0))
-
-# The tent's 3 x 3 weights by offset: each parity class of a 2 x 2 pattern weighs a quarter.
-_TENT = [(dr, dc, (2 - abs(dr)) * (2 - abs(dc))) for dr in (-1, 0, 1) for dc in (-1, 0, 1)]
-
 
 def classes(dx, dy, pattern):
     """(S,) int64: each sample's tilt direction (0 .. 3, `tilted_normals`) from its texel's
@@ -63,25 +54,3 @@ def tilted_normals(ng, tilt):
     tilted = np.cos(TILT) * ng.astype(np.float64) + np.sin(TILT) * side
     tilted /= np.linalg.norm(tilted, axis=1, keepdims=True)
     return np.where((tilt >= 0)[:, None], tilted, ng).astype(ng.dtype)
-
-
-def smoothed(values, grid, points, normals, spacing, target, use):
-    """Per sample (one per texel, `grid` a `sparse_gather.Grid` of them), the 3 x 3
-    tent-weighted mean of `values` (P, C) over its texel and the neighbours on the same
-    surface: in `use`, of the same `target`, within `_NEAR` texels (`spacing` (P,): a texel's
-    world size) and 20 degrees. Samples not in `use` keep their values."""
-    total = np.zeros(values.shape, np.float64)
-    weight = np.zeros(len(values), np.float64)
-    mine = np.flatnonzero(use)
-    for dr, dc, w in _TENT:
-        other = grid.neighbour(mine, dr, dc)
-        ok = other >= 0
-        j, i = other[ok], mine[ok]
-        ok[ok] = use[j] & (target[j] == target[i]) & ((normals[i] * normals[j]).sum(1) >= _COS_NORMAL) & (
-            np.linalg.norm(points[j] - points[i], axis=1) <= _NEAR * np.hypot(dr, dc) * spacing[i])
-        i, j = mine[ok], other[ok]  # each sample once per offset
-        total[i] += w * values[j]
-        weight[i] += w
-    out = values.copy()
-    out[mine] = (total[mine] / weight[mine, None]).astype(values.dtype)
-    return out
