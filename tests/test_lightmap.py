@@ -323,8 +323,8 @@ def test_sun_shadow_edge_against_ray_casting():
     direction /= np.linalg.norm(direction)
     r, samples = 32, 16
     out = bake(scene, [Target(Surface(mid, v, t), uv)], resolution=r, suns=[Sun(direction, math.pi)],
-               samples=samples, bounces=0, margin=0)[0]
-    # reference: the same sample points, one Embree ray each towards the sun
+               samples=samples, edge_samples=samples, bounces=0, margin=0)[0]
+    # reference: the same sample points (no edge supersampling), one Embree ray each towards the sun
     tx = texels.rasterize(np.asarray(uv)[t], r, samples)
     points = (v[t][tx.triangle] * tx.bary[:, :, None]).sum(1)
     blocker = trimesh.Trimesh(*wall, process=False)
@@ -355,6 +355,40 @@ def test_sun_shadow_edge_against_ray_casting():
     near = (p[wrong][:, None] + ring).reshape(-1, 3) + [0, 0, 1e-4]
     around = caster.intersects_any(near, np.tile(direction, (len(near), 1))).reshape(-1, 8)
     assert (around.any(1) & ~around.all(1)).all()  # each lies within 1 cm of the edge
+
+
+def test_sun_edge_texels_take_their_share_of_the_sun():
+    """A wall's sharp sun shadow across a plane: each texel against its share of 2,000 points in
+    the sun (Embree; low-discrepancy, so that they do not line up with the edge). Edge texels see the sun through 4 x 16 edge samples' points
+    (`SUN_EDGE_POINTS`): 1.7 % of the sun's light off at worst, 0.03 % on average; with the 16
+    edge samples alone, 4.4 % and 0.05 %."""
+    v, t, uv = grid_plane(n=8)
+    wall = cube([-0.15, -0.6, 0], [0.15, 0.6, 0.7])
+    scene, (mid, _) = scene_of((v, t), wall)
+    direction = np.array([0.8, 0.25, 0.6])
+    direction /= np.linalg.norm(direction)
+    r = 32
+    tx = texels.rasterize(np.asarray(uv)[t], r, 2000)
+    points = (v[t][tx.triangle] * tx.bary[:, :, None]).sum(1)
+    hit = RayMeshIntersector(trimesh.Trimesh(*wall, process=False)).intersects_any(
+        points + [0, 0, 1e-4], np.tile(direction, (len(points), 1)))
+    outside = (np.abs(points[:, 0]) > 0.17) | (np.abs(points[:, 1]) > 0.62)  # texels clear of the wall
+    whole = np.bincount(tx.texel, minlength=r * r) == np.bincount(tx.texel[outside], minlength=r * r)
+    share = np.bincount(tx.texel, ~hit, r * r) / np.maximum(np.bincount(tx.texel, minlength=r * r), 1)
+    edge = whole & (share > 0.02) & (share < 0.98)
+    assert edge.sum() > 20                                     # the edge crosses texels
+    worst = {}
+    for points_per_edge in (4, 1):
+        monkeypatch = pytest.MonkeyPatch()
+        monkeypatch.setattr(bake_module, "SUN_EDGE_POINTS", points_per_edge)
+        out = bake(scene, [Target(Surface(mid, v, t), uv)], resolution=r, suns=[Sun(direction, math.pi)], samples=4,
+                   bounces=0, margin=0)[0]
+        monkeypatch.undo()
+        error = np.abs(out["flat"][..., 0].ravel() / direction[2] - share)[whole]
+        worst[points_per_edge] = (error.max(), error.mean())
+        print(points_per_edge, "worst", error.max(), "mean", error.mean())
+    assert worst[4][0] < 0.02 and worst[4][1] < 0.0004
+    assert worst[1][0] > 2 * worst[4][0]                       # what the sun rays are for
 
 
 @pytest.mark.parametrize("n", [4, 16])

@@ -59,8 +59,12 @@ def light_patterns(key, index, samples):
     key, index = np.asarray(key, np.int64), np.asarray(index, np.int64)
     if samples <= 1 or not len(key):
         return index
+    if samples > 8:  # one permutation per texel, not per sample
+        key, of_sample = np.unique(key, return_inverse=True)
+    else:
+        of_sample = np.arange(len(key))
     hashes = _mixed(key.astype(np.uint64)[:, None] * np.uint64(samples) + np.arange(samples, dtype=np.uint64))
-    return np.argsort(hashes, axis=1)[np.arange(len(key)), index]
+    return np.argsort(hashes, axis=1)[of_sample.reshape(-1), index]
 
 
 def _mixed(x):
@@ -107,10 +111,13 @@ class _Corners:
         self.area = (self.bx - self.ax) * (self.cy - self.ay) - (self.by - self.ay) * (self.cx - self.ax)
 
     def weights(self, px, py):
-        """(wa, wb, wc) at points (px, py), each (K,)."""
-        bx, by, cx, cy = self.bx - px, self.by - py, self.cx - px, self.cy - py
-        wa = (bx * cy - by * cx) / self.area
-        wb = (cx * (self.ay - py) - cy * (self.ax - px)) / self.area
+        """(wa, wb, wc) at points (px, py), each (K,) or (K, n): n points per triangle."""
+        column = (slice(None),) + (None,) * (np.ndim(px) - 1)
+        ax, ay, bx, by, cx, cy, area = (v[column] for v in (self.ax, self.ay, self.bx, self.by, self.cx, self.cy,
+                                                               self.area))
+        bx, by, cx, cy = bx - px, by - py, cx - px, cy - py
+        wa = (bx * cy - by * cx) / area
+        wb = (cx * (ay - py) - cy * (ax - px)) / area
         return wa, wb, 1.0 - wa - wb
 
 
@@ -193,16 +200,20 @@ def rasterize(uv, resolution, samples, check=None, only=None):
         x, y = cx.astype(np.float64), cy.astype(np.float64)
         coverage[cell[_all_above(columns.weights(x + 0.5, y + 0.5), -_EPS, inclusive=True)]] = True
         hit_any = np.zeros(len(t_idx), bool)
-        for j, (ox, oy) in enumerate(offs):
+        block = max(1, _CANDIDATES_PER_CHUNK // max(len(t_idx), 1))  # offsets at a time: (candidates, block) arrays
+        for first in range(0, len(offs), block):
             if check is not None:
                 check()
-            w = columns.weights(x + ox, y + oy)
+            j = np.arange(first, min(first + block, len(offs)))
+            w = columns.weights(x[:, None] + offs[j, 0], y[:, None] + offs[j, 1])
             inside = _all_above(w, -_EPS, inclusive=True)
-            hit_any |= inside
-            keys.append(cell[inside] * len(offs) + j)
-            strict_keys.append(cell[_all_above(w, 1e-6)] * len(offs) + j)
-            tris.append(t_idx[inside])
-            bary.append(np.stack([v[inside] for v in w], axis=1))
+            hit_any |= inside.any(axis=1)
+            row, col = np.nonzero(inside)  # candidate-major: a sample in two triangles keeps the first's
+            keys.append(cell[row] * len(offs) + j[col])
+            strict = np.nonzero(_all_above(w, 1e-6))
+            strict_keys.append(cell[strict[0]] * len(offs) + j[strict[1]])
+            tris.append(t_idx[row])
+            bary.append(np.stack([v[row, col] for v in w], axis=1))
         rest = ~hit_any
         rest[rest] = _overlaps_square(corners[rest], np.stack([cx[rest], cy[rest]], axis=1).astype(np.float64))
         touched_t.append(cell[rest])
