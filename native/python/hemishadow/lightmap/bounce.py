@@ -169,7 +169,8 @@ def fill(values, known, triangles):
         return values
     t = np.asarray(triangles, dtype=np.int64)
     edges = np.stack([t[:, [0, 1, 2, 1, 2, 0]].ravel(), t[:, [1, 2, 0, 0, 1, 2]].ravel()], axis=1)
-    to, src = np.unique(edges, axis=0).T  # each neighbour once, however many triangles share the edge
+    size = int(edges.max()) + 1  # each neighbour once, however many triangles share the edge (1-D keys: fast)
+    to, src = np.divmod(np.unique(edges[:, 0] * size + edges[:, 1]), size)
     out, known = values.copy(), known.copy()
     while True:
         edge = known[src] & ~known[to]

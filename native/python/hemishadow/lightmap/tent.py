@@ -18,23 +18,27 @@ _COS_NORMAL = np.cos(np.radians(20.0))
 _TENT = [(dr, dc, (2 - abs(dr)) * (2 - abs(dc))) for dr in (-1, 0, 1) for dc in (-1, 0, 1)]
 
 
-def smoothed(values, grid, points, normals, spacing, target, use):
+def smoothed(values, grid, points, normals, spacing, target, use, chunk=1 << 15):
     """Per sample (one per texel, `grid` a `sparse_gather.Grid` of them), the 3 x 3
     tent-weighted mean of `values` (P, C) over its texel and the neighbours on the same
     surface: in `use`, of the same `target`, within `_NEAR` texels (`spacing` (P,): a texel's
-    world size) and 20 degrees. Samples not in `use` keep their values."""
-    total = np.zeros(values.shape, np.float64)
-    weight = np.zeros(len(values), np.float64)
-    mine = np.flatnonzero(use)
-    for dr, dc, w in _TENT:
-        other = grid.neighbour(mine, dr, dc)
-        ok = other >= 0
-        j, i = other[ok], mine[ok]
-        ok[ok] = use[j] & (target[j] == target[i]) & ((normals[i] * normals[j]).sum(1) >= _COS_NORMAL) & (
-            np.linalg.norm(points[j] - points[i], axis=1) <= _NEAR * np.hypot(dr, dc) * spacing[i])
-        i, j = mine[ok], other[ok]  # each sample once per offset
-        total[i] += w * values[j]
-        weight[i] += w
+    world size) and 20 degrees. Samples not in `use` keep their values. `chunk` samples at a
+    time (each gathers its 9 neighbours' values)."""
     out = values.copy()
-    out[mine] = (total[mine] / weight[mine, None]).astype(values.dtype)
+    mine = np.flatnonzero(use)
+    offsets = np.array([(dr, dc) for dr, dc, _ in _TENT])
+    tent = np.array([w for *_, w in _TENT], np.float32)
+    reach = (_NEAR * np.hypot(offsets[:, 0], offsets[:, 1])) ** 2
+    padded = np.concatenate([values, np.zeros((1,) + values.shape[1:], values.dtype)])  # row -1: no neighbour
+    for start in range(0, len(mine), chunk):
+        i = mine[start:start + chunk]
+        j = np.stack([grid.neighbour(i, dr, dc) for dr, dc in offsets], axis=1)   # (n, 9), -1: none
+        k = np.maximum(j, 0)
+        ok = (j >= 0) & use[k] & (target[k] == target[i, None])
+        ok &= np.einsum("nkd,nd->nk", normals[k], normals[i]) >= _COS_NORMAL
+        gap = points[k] - points[i, None]
+        ok &= np.einsum("nkd,nkd->nk", gap, gap) <= reach * spacing[i, None] ** 2
+        weights = np.where(ok, tent, np.float32(0))
+        near = np.einsum("nk,nkc->nc", weights, padded[np.where(ok, j, -1)].reshape(len(i), 9, -1))
+        out[i] = (near / weights.sum(axis=1, keepdims=True)).reshape((len(i),) + values.shape[1:])
     return out
