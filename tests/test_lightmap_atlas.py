@@ -23,7 +23,10 @@ def slot(uv, size, row, col, resolution=R):
                      1 - ((1 - uv[..., 1]) * size + row) / resolution], axis=-1)
 
 
-def test_atlas_texels_match_each_target_baked_alone():
+@pytest.mark.parametrize("plane_at, cylinder_at", [((4, 4), (4, 28)), ((5, 3), (5, 29))])
+def test_atlas_texels_match_each_target_baked_alone(plane_at, cylinder_at):
+    """Even and odd slot places: each texel's mask turns by its place relative to its
+    triangle's UV box (`tilts.classes`), not by its row and column in the map."""
     v, t, plane_uv = grid_plane(size=2.0, n=4)
     plane_uv = 0.125 + 0.75 * plane_uv                 # room for padding inside its own 16^2 map
     cv, ct, cyl_uv = cylinder()                          # a UV seam: the stitch pass runs
@@ -35,12 +38,12 @@ def test_atlas_texels_match_each_target_baked_alone():
                   samples=4)
     alone_plane = bake(scene, [Target(plane, plane_uv)], resolution=16, surfaces=[cyl], **kwargs)[0]
     alone_cyl = bake(scene, [Target(cyl, cyl_uv)], resolution=32, surfaces=[plane], **kwargs)[0]
-    out = bake(scene, [Target(plane, slot(plane_uv, 16, 4, 4)), Target(cyl, slot(cyl_uv, 32, 4, 28))],
+    out = bake(scene, [Target(plane, slot(plane_uv, 16, *plane_at)), Target(cyl, slot(cyl_uv, 32, *cylinder_at))],
                resolution=R, atlas=True, **kwargs)
     assert len(out) == 1
     atlas = out[0]
     worst = {}
-    for alone, (row, col, size) in ((alone_plane, (4, 4, 16)), (alone_cyl, (4, 28, 32))):
+    for alone, (row, col, size) in ((alone_plane, (*plane_at, 16)), (alone_cyl, (*cylinder_at, 32))):
         window = (slice(row, row + size), slice(col, col + size))
         for name in ("flat", "b0", "b1", "b2", "ao", "coverage", "valid"):
             a, b = np.asarray(atlas[name][window], np.float64), np.asarray(alone[name], np.float64)
@@ -49,7 +52,8 @@ def test_atlas_texels_match_each_target_baked_alone():
     print(worst)
     assert max(worst.values()) < 1e-4                    # the same texels, remapped through the slot
     assert atlas["flat"][40:, :].max() == 0             # nothing outside the slots and their padding
-    assert np.abs(atlas["flat"][4:20, 4:20] - alone_plane["flat"]).max() < 1e-4
+    window = (slice(plane_at[0], plane_at[0] + 16), slice(plane_at[1], plane_at[1] + 16))
+    assert np.abs(atlas["flat"][window] - alone_plane["flat"]).max() < 1e-4
 
 
 def test_padding_does_not_cross_into_another_targets_islands():

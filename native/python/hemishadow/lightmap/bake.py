@@ -549,14 +549,27 @@ def _lit_centres(scene, centres, light_args):
     around it (`_reached_from_centres`; a quarter of the walks in a closed room)."""
     layer, rest = np.divmod(centres.cell, centres.shape[1] * centres.shape[2])
     row, col = np.divmod(rest, centres.shape[2])
-    lattice = (row % 2 == 0) & (col % 2 == 0)
+    origin = _lattice_origins(centres)
+    step_row, step_col = (row - origin[:, 0]) % 2, (col - origin[:, 1]) % 2
+    lattice = (step_row == 0) & (step_col == 0)
     lit = _light(scene, centres.take(lattice), texels.offsets(1), **light_args)
     others = centres.take(~lattice)
     if not len(others.cell):
         return lit
-    corner = ((layer * centres.shape[1] + row - row % 2) * centres.shape[2] + col - col % 2)[~lattice]
+    corner = ((layer * centres.shape[1] + row - step_row) * centres.shape[2] + col - step_col)[~lattice]
     reached = _reached_from_centres(scene, lit, others, light_args["offset"], cells=corner)
     return lit.joined(_light(scene, others, texels.offsets(1), known_valid=reached, **light_args))
+
+
+def _lattice_origins(samples):
+    """(P, 2): the first row and column of each sample's target in the bake's grid, where its
+    lattices start (`_lit_centres`, `sparse_gather`): an atlas slot moves both with the target,
+    so a target bakes the same in an atlas as alone."""
+    row, col = samples.cell // samples.shape[2] % samples.shape[1], samples.cell % samples.shape[2]
+    first = np.full((int(samples.target.max(initial=0)) + 1, 2), np.iinfo(np.int64).max)
+    np.minimum.at(first[:, 0], samples.target, row)
+    np.minimum.at(first[:, 1], samples.target, col)
+    return first[samples.target]
 
 
 def _reached_from_centres(scene, centres, samples, offset, cells=None):
@@ -653,10 +666,11 @@ def _indirect(scene, receivers, lit, lighting, suns, lamps, bounces, offset, ste
         views = scene.gather_views(points[i], ng[i], bands=bounce.BANDS, offset=offset)
         return views.sh, views.distance[0]
 
+    origin, group = _lattice_origins(lit)[rep], lit.target[rep]
     out = sparse_gather.gather(gather_at,
                                bounce.BANDS ** 2, points, ng, lit.valid[rep], lit.cell[rep], lit.shape, steps,
-                               weight=len(lit.points) / max(len(rep), 1), floor=direct)
-    grid = sparse_gather.Grid(lit.cell[rep], lit.valid[rep], lit.shape)
+                               weight=len(lit.points) / max(len(rep), 1), floor=direct, origin=origin, group=group)
+    grid = sparse_gather.Grid(lit.cell[rep], lit.valid[rep], lit.shape, group=group)
     out = tent.smoothed(out.reshape(len(out), -1), grid, points, ng, lit.spacing[rep], lit.target[rep], lit.valid[rep])
     return out.reshape(len(out), bounce.BANDS ** 2, 3)[of_sample]
 

@@ -56,33 +56,46 @@ _NEIGHBOURS = {(1, 0): ((-1, 0), (1, 0), (-1, 0), (1, 0)),
 
 
 class Grid:
-    """Receivers on the texel grid: their rows and columns, and the valid receiver of each cell."""
+    """Receivers on the texel grid: their rows and columns, and the valid receiver of each cell.
+    origin (N, 2): the row and column each receiver's lattices count from (its target's first
+    ones, so that they fall on the same texels in an atlas as alone; default 0, 0); group
+    (N,): receivers of another group (target) are no one's neighbours (default: one group)."""
 
-    def __init__(self, cell, valid, shape):
+    def __init__(self, cell, valid, shape, origin=None, group=None):
         self.rows, self.cols = shape[1:]
         self.cell, self.row, self.col = cell, cell // self.cols % self.rows, cell % self.cols
+        self.origin = np.zeros((len(cell), 2), np.int64) if origin is None else np.asarray(origin, np.int64)
+        self.group = np.zeros(len(cell), np.int64) if group is None else np.asarray(group, np.int64)
         self.at = np.full(int(np.prod(shape)), -1, np.int64)
         self.at[cell[valid]] = np.flatnonzero(valid)
 
     def on(self, spacing):
-        return (self.row % spacing == 0) & (self.col % spacing == 0)
+        """Receivers on the lattice of every `spacing`-th row and column (from their origin)."""
+        return ((self.row - self.origin[:, 0]) % spacing == 0) & ((self.col - self.origin[:, 1]) % spacing == 0)
+
+    def parity(self, i, half):
+        """(len(i), 2): receivers i's row and column parity in steps of `half` (from their origin)."""
+        return np.stack([(self.row[i] - self.origin[i, 0]) // half % 2, (self.col[i] - self.origin[i, 1]) // half % 2],
+                        axis=1)
 
     def neighbour(self, i, dr, dc):
         """The receivers (len(i),) dr rows and dc columns away from receivers i; -1 off the
-        map or where that cell has no valid receiver."""
+        map, where that cell has no valid receiver, or one of another group."""
         r, c = self.row[i] + dr, self.col[i] + dc
         inside = (r >= 0) & (r < self.rows) & (c >= 0) & (c < self.cols)
-        return np.where(inside, self.at[np.where(inside, self.cell[i] + dr * self.cols + dc, 0)], -1)
+        j = np.where(inside, self.at[np.where(inside, self.cell[i] + dr * self.cols + dc, 0)], -1)
+        return np.where((j >= 0) & (self.group[np.maximum(j, 0)] == self.group[i]), j, -1)
 
 
 def gather(gather_at, coefficients, points, normals, valid, cell, shape, steps=None, weight=1, contrast=CONTRAST,
-           floor=None):
+           floor=None, origin=None, group=None):
     """SH (N, coefficients, 3) of N receivers, one per texel, `gather_at(indices)` gathering
     for some of them; `cell` (N,) their texels in the flattened (layers, R, R) grid `shape`;
     invalid ones get zeros. steps: a `bake.Steps` chunking the gathers, stepped by `weight`
     per receiver. floor (N, 3): the least band 0 each receiver's error is measured against
-    (the bake gives its direct light, in band-0 units: an error is seen against the total)."""
-    grid = Grid(cell, valid, shape)
+    (the bake gives its direct light, in band-0 units: an error is seen against the total).
+    origin, group: see `Grid`."""
+    grid = Grid(cell, valid, shape, origin, group)
     out = np.zeros((len(cell), coefficients, 3), np.float32)
     distance = np.full(len(cell), np.inf, np.float32)
     if steps is not None:
@@ -107,7 +120,7 @@ def _interpolated(out, distance, grid, new, spacing, points, normals, contrast, 
     smoothly between their neighbours on the lattice of `spacing` to their mean; which did."""
     half = spacing // 2
     neighbours = np.full((len(new), 4), -1, np.int64)
-    parity = np.stack([grid.row[new] // half % 2, grid.col[new] // half % 2], axis=1)
+    parity = grid.parity(new, half)
     for key, offsets in _NEIGHBOURS.items():
         mine = np.flatnonzero((parity[:, 0] == key[0]) & (parity[:, 1] == key[1]))
         for k, (dr, dc) in enumerate(offsets):
