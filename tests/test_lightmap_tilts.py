@@ -64,7 +64,7 @@ def test_smoothed_is_a_tent_that_stays_on_its_surface():
     spacing = np.full(36, 0.1)
     target = np.zeros(36, np.int64)
     grid = sparse_gather.Grid(cell, valid, shape)
-    out = tent.smoothed(values, grid, points, normals, spacing, target, valid)
+    out = tent.smoothed(values, grid, points, normals, spacing, valid)
     v = values.reshape(6, 6, 2)
     kernel = np.outer([1, 2, 1], [1, 2, 1]) / 16
     expected = (v[1:4, 1:4] * kernel[..., None]).sum((0, 1))    # texel (2, 2): inside, the full tent
@@ -80,7 +80,7 @@ def test_smoothed_is_a_tent_that_stays_on_its_surface():
     far.reshape(6, 6, 3)[4:, :, 2] += 1.0                      # rows 4, 5: another island, a metre up
     folded = normals.copy()
     folded.reshape(6, 6, 3)[:, 0] = (1.0, 0.0, 0.0)            # column 0: a wall at 90 degrees
-    out = tent.smoothed(values, grid, far, folded, spacing, other, use)
+    out = tent.smoothed(values, sparse_gather.Grid(cell, valid, shape, group=other), far, folded, spacing, use)
     assert (out[3] == values[3]).all()
     for r in range(6):
         for c in range(6):

@@ -363,8 +363,7 @@ def bake(scene, targets, *, resolution, lighting=None, suns=(), lamps=(), surfac
                     lit.sh[s] += gathered[s, :4] / np.float32(np.pi)
 
     names = ["flat"] + (["b0", "b1", "b2"] if basis == "hl2" else []) + (["sh0", "sh1", "sh2", "sh3"] if want_sh else [])
-    values = np.concatenate([lit.maps.reshape(len(lit.points), -1)]
-                            + ([lit.sh.reshape(len(lit.points), -1)] if want_sh else []) + [lit.ao[:, None]], axis=1)
+    values = _value_rows(lit.maps, lit.sh, lit.ao)
     parts = [(lit.target == k, tx, tris, uv) for k, (tx, *_rest, tris, uv) in enumerate(geo)]
     if atlas:
         return [_finish_atlas([(lit.texel[of], tx, values[of], lit.valid[of], tris, uv) for of, tx, tris, uv in parts],
@@ -447,14 +446,20 @@ def _light(scene, samples, offsets, *, lighting, suns, lamps, lamp_points, want_
     masks, valid = _masks_and_valid(scene, samples.points, tilted, offset, steps, known_valid)
     valid &= samples.usable
     maps, ao, sh = environment_light(masks, samples.ng, samples.lobes, lighting, want_sh, steps)
-    environment = np.concatenate([maps.reshape(len(ao), -1)] + ([sh.reshape(len(ao), -1)] if want_sh else [])
-                                 + [ao[:, None]], axis=1)
+    environment = _value_rows(maps, sh, ao)
     grid = (samples.cell, samples.shape) if adaptive_suns else None
     more, more_sh, sun_lit = sun_and_lamp_light(scene, samples.points, samples.ng, samples.lobes, suns, samples.index,
                                                 offsets, want_sh, offset, steps, texel_grid=grid, lamps=lamps,
                                                 lamp_points=lamp_points)
     return replace(samples, valid=valid, maps=maps + more, ao=ao, sh=sh + more_sh if want_sh else None, sun=sun_lit,
                    environment=environment)
+
+
+def _value_rows(maps, sh, ao):
+    """(P, C): each sample's maps (P, L, 3), L1 SH (P, 4, 3; None: none) and ao (P,) side by
+    side, the bake's value rows (`_Samples.environment` too)."""
+    return np.concatenate([maps.reshape(len(ao), -1)] + ([] if sh is None else [sh.reshape(len(ao), -1)])
+                          + [ao[:, None]], axis=1)
 
 
 def _refined(scene, centres, full, offsets, contrast, steps, light_args, finer=None, edge_samples=None):
@@ -534,8 +539,8 @@ def _smoothed_environment(lit, smooth):
     turned lattices averaged, `tilts.py`)."""
     if not smooth.any():
         return lit
-    grid = sparse_gather.Grid(lit.cell, lit.valid, lit.shape)
-    environment = tent.smoothed(lit.environment, grid, lit.points, lit.ng, lit.spacing, lit.target, smooth)
+    grid = sparse_gather.Grid(lit.cell, lit.valid, lit.shape, group=lit.target)
+    environment = tent.smoothed(lit.environment, grid, lit.points, lit.ng, lit.spacing, smooth)
     change = environment - lit.environment
     size = lit.maps[0].size
     maps = lit.maps + change[:, :size].reshape(lit.maps.shape)
@@ -671,7 +676,7 @@ def _indirect(scene, receivers, lit, lighting, suns, lamps, bounces, offset, ste
                                bounce.BANDS ** 2, points, ng, lit.valid[rep], lit.cell[rep], lit.shape, steps,
                                weight=len(lit.points) / max(len(rep), 1), floor=direct, origin=origin, group=group)
     grid = sparse_gather.Grid(lit.cell[rep], lit.valid[rep], lit.shape, group=group)
-    out = tent.smoothed(out.reshape(len(out), -1), grid, points, ng, lit.spacing[rep], lit.target[rep], lit.valid[rep])
+    out = tent.smoothed(out.reshape(len(out), -1), grid, points, ng, lit.spacing[rep], lit.valid[rep])
     return out.reshape(len(out), bounce.BANDS ** 2, 3)[of_sample]
 
 

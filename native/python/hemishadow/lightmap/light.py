@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import _native, sh_basis
-from . import basis, cells
+from . import basis, cells, lamps
 
 
 @dataclass
@@ -149,10 +149,8 @@ def sun_visibility(scene, points, ng, directions, offset=None, exact=True):
     soft bounce light only)."""
     if not exact:
         return _mask_visibility(scene, points, ng, directions, offset)
-    size = scene.size
-    lift = size * (1e-4 if offset is None else offset)
-    start = points + ng * lift
-    far = start + directions * (2.0 * size + 1.0)
+    start = points + ng * lamps.lift(scene, offset)
+    far = start + directions * (2.0 * scene.size + 1.0)
     return (~scene.occluded(start, far, offset=offset)).astype(np.float32)
 
 

@@ -18,11 +18,11 @@ _COS_NORMAL = np.cos(np.radians(20.0))
 _TENT = [(dr, dc, (2 - abs(dr)) * (2 - abs(dc))) for dr in (-1, 0, 1) for dc in (-1, 0, 1)]
 
 
-def smoothed(values, grid, points, normals, spacing, target, use, chunk=1 << 15):
-    """Per sample (one per texel, `grid` a `sparse_gather.Grid` of them), the 3 x 3
-    tent-weighted mean of `values` (P, C) over its texel and the neighbours on the same
-    surface: in `use`, of the same `target`, within `_NEAR` texels (`spacing` (P,): a texel's
-    world size) and 20 degrees. Samples not in `use` keep their values. `chunk` samples at a
+def smoothed(values, grid, points, normals, spacing, use, chunk=1 << 15):
+    """Per sample (one per texel, `grid` a `sparse_gather.Grid` of them, grouped by target),
+    the 3 x 3 tent-weighted mean of `values` (P, C) over its texel and the neighbours on the
+    same surface: the grid's (its group), in `use`, within `_NEAR` texels (`spacing` (P,): a
+    texel's world size) and 20 degrees. Samples not in `use` keep their values. `chunk` samples at a
     time (each gathers its 9 neighbours' values)."""
     out = values.copy()
     mine = np.flatnonzero(use)
@@ -34,7 +34,7 @@ def smoothed(values, grid, points, normals, spacing, target, use, chunk=1 << 15)
         i = mine[start:start + chunk]
         j = np.stack([grid.neighbour(i, dr, dc) for dr, dc in offsets], axis=1)   # (n, 9), -1: none
         k = np.maximum(j, 0)
-        ok = (j >= 0) & use[k] & (target[k] == target[i, None])
+        ok = (j >= 0) & use[k]
         ok &= np.einsum("nkd,nd->nk", normals[k], normals[i]) >= _COS_NORMAL
         gap = points[k] - points[i, None]
         ok &= np.einsum("nkd,nkd->nk", gap, gap) <= reach * spacing[i, None] ** 2
