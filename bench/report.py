@@ -250,6 +250,8 @@ def targets(results):
         out.append(f"| median error <= 2 % | {name} | {pct(d['error']['median'])} (mean over AO >= 0.1: "
                    f"{pct(d['error']['mean'])}) | {met(d['error']['median'] <= TARGET_ERROR)} |")
     out.append(scale_target(results))
+    out.append("\nWhere the 8k Suzanne's frame goes, and what was tried for 40 frames per second: "
+               "[solver_speed.md](solver_speed.md).")
     others = [(n, next(r for r in m["hemishadow"] if r["method"] == "default")) for n, m in results["meshes"].items()]
     out.append("\nDefault median error on every mesh: " + ", ".join(f"{n} {pct(d['error']['median'])}" for n, d in others)
                + f" ({'all' if all(d['error']['median'] <= TARGET_ERROR for _, d in others) else 'not all'} at or below 2 %).\n")

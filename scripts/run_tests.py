@@ -4,7 +4,8 @@
     .venv/bin/python scripts/run_tests.py --only 4.2 # the groups whose name contains "4.2"
 
 Groups, in order:
-  rust            cargo test --release of the engine;
+  rust            cargo test --release of the engine, and its profiling example built with
+                  the census feature;
   5.3 engine      pytest tests/*.py in .venv (the primary version: bpy 5.3 on Python 3.13);
   5.3 add-on      pytest tests/addon in .venv (the add-on from source, the zip's install tests);
   X.Y zip         for each requirements-X.Y.txt (the second tier, .venv-X.Y from
@@ -99,7 +100,10 @@ def groups() -> list[tuple[str, list, dict | None, pathlib.Path | None]]:
 
     results = OUT / "test-results"
     primary = ROOT / ".venv" / "bin" / "python"
-    out = [("rust", ["cargo", "test", "--release", "--manifest-path", "native/Cargo.toml"], None, None)]
+    # The census build keeps the profiling feature compiling (docs/solver_speed.md).
+    rust = ("cargo test --release --manifest-path native/Cargo.toml && cargo build --release --manifest-path "
+            "native/Cargo.toml --example profile_solver --features hemishadow-engine/census")
+    out = [("rust", ["bash", "-c", rust], None, None)]
     engine_tests = sorted(str(p.relative_to(ROOT)) for p in (ROOT / "tests").glob("test_*.py"))
     xml = results / "engine.xml"
     out.append((f"{PRIMARY} engine", [primary, "-m", "pytest", "-q", f"--junitxml={xml}", *engine_tests], None, xml))

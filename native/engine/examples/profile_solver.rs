@@ -3,6 +3,9 @@
 //!
 //!     cargo run --release --example profile_solver -- mesh.bin [downsample] [table] [near_scale] [coarse triangles]
 //!
+//! With `--features census`, also prints what the rasterized triangles added to their masks
+//! (`rasterizer::census`; every mask is then drawn twice, so the times mean nothing).
+//!
 //! `PROFILE_SOLVES=N` times exactly N solves (for instruction counts under valgrind, which
 //! are steady where times on a shared machine are not); by default, up to 100 in 5 s.
 
@@ -57,10 +60,25 @@ fn main() {
         times.push(t.elapsed().as_secs_f64() * 1e3);
     }
     let cpu_per_solve = (cpu_ms() - cpu_start) / times.len() as f64;
+    #[cfg(feature = "census")]
+    print_census();
     times.sort_by(f64::total_cmp);
     let stats = solver.stats();
     println!(
         "{}: {} vertices, {:.2} ms median over {} solves ({:.1} CPU ms per solve), {:.0} blockers per receiver",
         args[1], frames[0].len(), times[times.len() / 2], times.len(), cpu_per_solve, stats.blockers_per_receiver
     );
+}
+
+/// The census as shares of every triangle rasterized, by outcome and height.
+#[cfg(feature = "census")]
+fn print_census() {
+    let counts = hemishadow_engine::rasterizer::census::counts();
+    let total: u64 = counts.iter().flatten().sum();
+    let share = |n: u64| 100.0 * n as f64 / total.max(1) as f64;
+    println!("census of {total} triangles (highest corner's z: below 0.1 / below 0.5 / above; % of all)");
+    for (name, row) in ["covers no cell", "covers only blocked cells", "blocks new cells"].iter().zip(counts) {
+        let parts: Vec<String> = row.iter().map(|&n| format!("{:.1}", share(n))).collect();
+        println!("  {name:>26}: {:.1} % ({})", share(row.iter().sum()), parts.join(" / "));
+    }
 }

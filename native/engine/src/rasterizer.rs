@@ -129,6 +129,9 @@ pub struct Pipeline {
     /// lanes: prefetched, not yet OR-ed.
     pending: [[u32; LANES]; 3],
     pending_lanes: u32,
+    /// Every mask drawn so far, OR-ed at once rather than a packet late (`census`).
+    #[cfg(feature = "census")]
+    seen: Mask,
 }
 
 impl Pipeline {
@@ -198,8 +201,44 @@ impl Pipeline {
         }
         let mut codes = [[0u32; LANES]; 3];
         let solid = edge_codes(table, &local, &mut codes);
+        #[cfg(feature = "census")]
+        census::count(table, &local, &codes, candidates & solid, &mut self.seen);
         self.advance(table, &codes, candidates & solid, mask);
         candidates.count_ones()
+    }
+}
+
+/// What the solver's triangles add to their receivers' masks (feature `census`, for profiling
+/// only: it draws every mask twice). Counts by outcome (no cell, only cells already blocked,
+/// new cells) and by the height of the highest corner's direction above the horizon
+/// (z below 0.1, below 0.5, higher).
+#[cfg(feature = "census")]
+pub mod census {
+    use std::sync::atomic::{AtomicU64, Ordering};
+
+    use super::{LocalCorners, Mask, PlaneTable, LANES};
+
+    static COUNTS: [[AtomicU64; 3]; 3] = [const { [const { AtomicU64::new(0) }; 3] }; 3];
+
+    /// `[outcome][height]` counts since the start (outcome: empty, hidden, adding).
+    pub fn counts() -> [[u64; 3]; 3] {
+        std::array::from_fn(|o| std::array::from_fn(|h| COUNTS[o][h].load(Ordering::Relaxed)))
+    }
+
+    pub(super) fn count(table: &PlaneTable, local: &LocalCorners, codes: &[[u32; LANES]; 3], lanes: u32, seen: &mut Mask) {
+        let mut bits = lanes;
+        while bits != 0 {
+            let i = bits.trailing_zeros() as usize;
+            bits &= bits - 1;
+            let covered = Mask::and3(&table.mask_of_code(codes[0][i]), &table.mask_of_code(codes[1][i]), &table.mask_of_code(codes[2][i]));
+            let outcome = if covered == Mask::EMPTY { 0 } else if covered.and_not(seen) == Mask::EMPTY { 1 } else { 2 };
+            seen.or_assign(&covered);
+            let height = (0..3)
+                .map(|k| local[k][2][i] / (local[k][0][i].powi(2) + local[k][1][i].powi(2) + local[k][2][i].powi(2)).sqrt())
+                .fold(f32::NEG_INFINITY, f32::max);
+            let band = if height < 0.1 { 0 } else if height < 0.5 { 1 } else { 2 };
+            COUNTS[outcome][band].fetch_add(1, Ordering::Relaxed);
+        }
     }
 }
 
