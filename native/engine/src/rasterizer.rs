@@ -196,6 +196,8 @@ impl Pipeline {
             *keep = above & !own;
         }
         let candidates = lane_bits(&keep) & lanes & packet.lanes;
+        #[cfg(feature = "census")]
+        census::packet(lanes & packet.lanes, candidates);
         if candidates == 0 {
             return 0;
         }
@@ -211,7 +213,7 @@ impl Pipeline {
 /// What the solver's triangles add to their receivers' masks (feature `census`, for profiling
 /// only: it draws every mask twice). Counts by outcome (no cell, only cells already blocked,
 /// new cells) and by the height of the highest corner's direction above the horizon
-/// (z below 0.1, below 0.5, higher).
+/// (z below 0.1, below 0.5, higher), and the packets the solver's walk hands over.
 #[cfg(feature = "census")]
 pub mod census {
     use std::sync::atomic::{AtomicU64, Ordering};
@@ -223,6 +225,23 @@ pub mod census {
     /// `[outcome][height]` counts since the start (outcome: empty, hidden, adding).
     pub fn counts() -> [[u64; 3]; 3] {
         std::array::from_fn(|o| std::array::from_fn(|h| COUNTS[o][h].load(Ordering::Relaxed)))
+    }
+
+    /// Packets with lanes to draw, their lanes, and the lanes drawn (above the horizon, not
+    /// the receiver's own).
+    static PACKETS: [AtomicU64; 3] = [const { AtomicU64::new(0) }; 3];
+
+    /// `[packets, lanes offered, lanes drawn]` since the start.
+    pub fn packets() -> [u64; 3] {
+        std::array::from_fn(|i| PACKETS[i].load(Ordering::Relaxed))
+    }
+
+    pub(super) fn packet(offered: u32, drawn: u32) {
+        if offered != 0 {
+            PACKETS[0].fetch_add(1, Ordering::Relaxed);
+            PACKETS[1].fetch_add(offered.count_ones() as u64, Ordering::Relaxed);
+            PACKETS[2].fetch_add(drawn.count_ones() as u64, Ordering::Relaxed);
+        }
     }
 
     pub(super) fn count(table: &PlaneTable, local: &LocalCorners, codes: &[[u32; LANES]; 3], lanes: u32, seen: &mut Mask) {
