@@ -32,7 +32,8 @@ def run(field, r=32, valid=None, distance=np.inf, floor=None, contrast=sparse_ga
         asked.append(np.asarray(i))
         return field(points[i]), np.full(len(i), distance, np.float32)
 
-    out = sparse_gather.gather(gather_at, 9, points, normals, valid, cell, shape, contrast=contrast, floor=floor)
+    out = sparse_gather.gather(gather_at, 9, points, normals, sparse_gather.Grid(cell, valid, shape), contrast=contrast,
+                               floor=floor)
     gathered = np.zeros(len(cell), bool)
     for i in asked:
         assert not gathered[i].any()  # each receiver at most once
@@ -117,7 +118,7 @@ def test_a_texel_across_a_seam_from_its_neighbours_gathers():
             points[points[:, 0] > 0.5, 2] += 3.0  # columns 8-15 are elsewhere
         asked = []
         out = sparse_gather.gather(lambda i: (asked.append(i), (sh_field(np.ones(len(i))), np.full(len(i), np.inf)))[1],
-                                   9, points, normals, np.ones(len(cell), bool), cell, shape)
+                                   9, points, normals, sparse_gather.Grid(cell, np.ones(len(cell), bool), shape))
         np.testing.assert_allclose(out, sh_field(np.ones(len(cell))))
         gathered = np.zeros(len(cell), bool)
         gathered[np.concatenate(asked)] = True

@@ -62,7 +62,6 @@ def test_smoothed_is_a_tent_that_stays_on_its_surface():
     values = rng.random((36, 2)).astype(np.float32)
     valid = np.ones(36, bool)
     spacing = np.full(36, 0.1)
-    target = np.zeros(36, np.int64)
     grid = sparse_gather.Grid(cell, valid, shape)
     out = tent.smoothed(values, grid, points, normals, spacing, valid)
     v = values.reshape(6, 6, 2)
@@ -74,7 +73,7 @@ def test_smoothed_is_a_tent_that_stays_on_its_surface():
 
     use = valid.copy()
     use[3] = False                                              # not smoothed, and nobody's neighbour
-    other = target.copy()
+    other = np.zeros(36, np.int64)
     other.reshape(6, 6)[:, 4:] = 1                             # columns 4, 5: another target (an atlas)
     far = points.copy()
     far.reshape(6, 6, 3)[4:, :, 2] += 1.0                      # rows 4, 5: another island, a metre up

@@ -671,11 +671,9 @@ def _indirect(scene, receivers, lit, lighting, suns, lamps, bounces, offset, ste
         views = scene.gather_views(points[i], ng[i], bands=bounce.BANDS, offset=offset)
         return views.sh, views.distance[0]
 
-    origin, group = _lattice_origins(lit)[rep], lit.target[rep]
-    out = sparse_gather.gather(gather_at,
-                               bounce.BANDS ** 2, points, ng, lit.valid[rep], lit.cell[rep], lit.shape, steps,
-                               weight=len(lit.points) / max(len(rep), 1), floor=direct, origin=origin, group=group)
-    grid = sparse_gather.Grid(lit.cell[rep], lit.valid[rep], lit.shape, group=group)
+    grid = sparse_gather.Grid(lit.cell[rep], lit.valid[rep], lit.shape, _lattice_origins(lit)[rep], lit.target[rep])
+    out = sparse_gather.gather(gather_at, bounce.BANDS ** 2, points, ng, grid, steps,
+                               weight=len(lit.points) / max(len(rep), 1), floor=direct)
     out = tent.smoothed(out.reshape(len(out), -1), grid, points, ng, lit.spacing[rep], lit.valid[rep])
     return out.reshape(len(out), bounce.BANDS ** 2, 3)[of_sample]
 

@@ -56,14 +56,16 @@ _NEIGHBOURS = {(1, 0): ((-1, 0), (1, 0), (-1, 0), (1, 0)),
 
 
 class Grid:
-    """Receivers on the texel grid: their rows and columns, and the valid receiver of each cell.
+    """Receivers on the texel grid: which are valid, their rows and columns, and the valid
+    receiver of each cell.
     origin (N, 2): the row and column each receiver's lattices count from (its target's first
     ones, so that they fall on the same texels in an atlas as alone; default 0, 0); group
     (N,): receivers of another group (target) are no one's neighbours (default: one group)."""
 
     def __init__(self, cell, valid, shape, origin=None, group=None):
         self.rows, self.cols = shape[1:]
-        self.cell, self.row, self.col = cell, cell // self.cols % self.rows, cell % self.cols
+        self.cell, self.valid = cell, valid
+        self.row, self.col = cell // self.cols % self.rows, cell % self.cols
         self.origin = np.zeros((len(cell), 2), np.int64) if origin is None else np.asarray(origin, np.int64)
         self.group = np.zeros(len(cell), np.int64) if group is None else np.asarray(group, np.int64)
         self.at = np.full(int(np.prod(shape)), -1, np.int64)
@@ -87,17 +89,15 @@ class Grid:
         return np.where((j >= 0) & (self.group[np.maximum(j, 0)] == self.group[i]), j, -1)
 
 
-def gather(gather_at, coefficients, points, normals, valid, cell, shape, steps=None, weight=1, contrast=CONTRAST,
-           floor=None, origin=None, group=None):
-    """SH (N, coefficients, 3) of N receivers, one per texel, `gather_at(indices)` gathering
-    for some of them; `cell` (N,) their texels in the flattened (layers, R, R) grid `shape`;
-    invalid ones get zeros. steps: a `bake.Steps` chunking the gathers, stepped by `weight`
-    per receiver. floor (N, 3): the least band 0 each receiver's error is measured against
-    (the bake gives its direct light, in band-0 units: an error is seen against the total).
-    origin, group: see `Grid`."""
-    grid = Grid(cell, valid, shape, origin, group)
-    out = np.zeros((len(cell), coefficients, 3), np.float32)
-    distance = np.full(len(cell), np.inf, np.float32)
+def gather(gather_at, coefficients, points, normals, grid, steps=None, weight=1, contrast=CONTRAST, floor=None):
+    """SH (N, coefficients, 3) of N receivers, one per texel (`grid`, a `Grid` of them),
+    `gather_at(indices)` gathering for some of them; invalid ones get zeros. steps: a
+    `bake.Steps` chunking the gathers, stepped by `weight` per receiver. floor (N, 3): the
+    least band 0 each receiver's error is measured against (the bake gives its direct light,
+    in band-0 units: an error is seen against the total)."""
+    valid = grid.valid
+    out = np.zeros((len(grid.cell), coefficients, 3), np.float32)
+    distance = np.full(len(grid.cell), np.inf, np.float32)
     if steps is not None:
         steps.step(int((~valid).sum()) * weight)
     spacing = 2 ** LEVELS
