@@ -3,7 +3,7 @@
 //!
 //!     cargo run --release --example profile_solver -- mesh.bin [downsample] [table] [near_scale] [coarse triangles]
 //!
-//! With `--features census`, also prints what the rasterized triangles added to their masks
+//! With `--features hemishadow-engine/census`, also prints what the rasterized triangles added to their masks
 //! (`rasterizer::census`; every mask is then drawn twice, so the times mean nothing).
 //!
 //! `PROFILE_SOLVES=N` times exactly N solves (for instruction counts under valgrind, which

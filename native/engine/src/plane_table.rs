@@ -358,6 +358,12 @@ impl PlaneTable {
         }
     }
 
+    /// The mask of a triangle whose three edge planes have these codes: theirs AND-ed.
+    #[inline(always)]
+    pub fn triangle_of_codes(&self, [ab, bc, ca]: [u32; 3]) -> Mask {
+        Mask::and3(&self.mask_of_code(ab), &self.mask_of_code(bc), &self.mask_of_code(ca))
+    }
+
     /// The mask of a code (`code`): `mask_at` of its texel.
     #[inline(always)]
     pub fn mask_of_code(&self, code: u32) -> Mask {

@@ -158,7 +158,7 @@ impl Pipeline {
         while bits != 0 {
             let i = bits.trailing_zeros() as usize;
             bits &= bits - 1;
-            mask.or_assign(&Mask::and3(&table.mask_of_code(ab[i]), &table.mask_of_code(bc[i]), &table.mask_of_code(ca[i])));
+            mask.or_assign(&table.triangle_of_codes([ab[i], bc[i], ca[i]]));
         }
         self.pending_lanes = 0;
     }
@@ -249,11 +249,12 @@ pub mod census {
         while bits != 0 {
             let i = bits.trailing_zeros() as usize;
             bits &= bits - 1;
-            let covered = Mask::and3(&table.mask_of_code(codes[0][i]), &table.mask_of_code(codes[1][i]), &table.mask_of_code(codes[2][i]));
+            let covered = table.triangle_of_codes(codes.map(|edge| edge[i]));
             let outcome = if covered == Mask::EMPTY { 0 } else if covered.and_not(seen) == Mask::EMPTY { 1 } else { 2 };
             seen.or_assign(&covered);
+            let corner = |k: usize| [local[k][0][i], local[k][1][i], local[k][2][i]];
             let height = (0..3)
-                .map(|k| local[k][2][i] / (local[k][0][i].powi(2) + local[k][1][i].powi(2) + local[k][2][i].powi(2)).sqrt())
+                .map(|k| local[k][2][i] / super::dot(corner(k), corner(k)).sqrt())
                 .fold(f32::NEG_INFINITY, f32::max);
             let band = if height < 0.1 { 0 } else if height < 0.5 { 1 } else { 2 };
             COUNTS[outcome][band].fetch_add(1, Ordering::Relaxed);

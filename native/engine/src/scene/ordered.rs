@@ -228,8 +228,8 @@ impl DepthSink<'_> {
     fn draw_pending(&mut self) {
         let t = self.table;
         for k in 0..self.pending_len {
-            let Pending { corners: [a, b, c], ids, tag, codes: [ab, bc, ca] } = self.pending[k];
-            let covered = Mask::and3(&t.mask_of_code(ab), &t.mask_of_code(bc), &t.mask_of_code(ca));
+            let Pending { corners: [a, b, c], ids, tag, codes } = self.pending[k];
+            let covered = t.triangle_of_codes(codes);
             self.raw.or_assign(&covered);
             self.draw(covered, a, b, c, ids, tag);
         }
