@@ -1,0 +1,92 @@
+"""Time and error of one `TransferSolver` setting on a benchmark Suzanne, the way bench/run.py
+measures them, for trying a change to the solver without the whole benchmark (the numbers
+of docs/solver_speed.md's tries):
+
+    .venv/bin/python bench/solver_variant.py                         # the default, 8k Suzanne
+    .venv/bin/python bench/solver_variant.py --set near_scale=1.0 --set far_lod=0.7
+    .venv/bin/python bench/solver_variant.py --level 3 --rounds 1    # the 32k Suzanne
+
+The frames (`scenes.suzanne`, 7 of them, frame 0 the rest pose), normals, offset, the 500
+receivers and their reference (128^2 rays, frames 2 and 5, on all cores) are bench/run.py's;
+they are cached in out/solver_variant/ (the reference takes a minute). Prints the median time
+per `solve` over `--rounds` passes of the moving frames (reuse off), the blockers per
+receiver, and the median and mean (AO >= 0.1) error of frames 2 and 5.
+"""
+
+import argparse
+import ast
+import pathlib
+import sys
+import time
+
+import numpy as np
+
+HERE = pathlib.Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+sys.path.insert(0, str(HERE.parent / "tests"))
+
+import hemishadow  # noqa: E402
+import reference  # noqa: E402
+
+EVALUATED = (2, 5)
+CACHE = HERE.parent / "out" / "solver_variant"
+
+
+def prepared(level):
+    """The mesh, its frames and the reference of the evaluated frames, cached per level."""
+    path = CACHE / f"suzanne_{level}.npz"
+    if not path.exists():
+        import peers
+        import scenes
+
+        frames, tris = scenes.suzanne(level, n_frames=7)
+        tris64 = tris.astype(np.int64)
+        normals = np.stack([reference.vertex_normals(f, tris64) for f in frames]).astype(np.float32)
+        offset = 1e-3 * reference.mean_edge_length(frames[0], tris64)
+        ids = np.sort(np.random.default_rng(12345).choice(frames.shape[1], 500, replace=False))
+        with peers.EmbreePool() as pool:
+            refs = {f: pool.reference(frames[f], tris64, normals[f], offset, 128, 1000 * f, ids) for f in EVALUATED}
+        CACHE.mkdir(parents=True, exist_ok=True)
+        part = path.with_name(path.stem + ".part.npz")
+        np.savez(part, frames=frames, tris=tris, normals=normals, offset=offset, ids=ids,
+                 **{f"T{f}": refs[f][0] for f in EVALUATED}, **{f"ao{f}": refs[f][1] for f in EVALUATED})
+        part.replace(path)
+    return np.load(path)
+
+
+def setting(text):
+    """`name=value` -> (name, value), the value a Python literal."""
+    name, _, value = text.partition("=")
+    if not name or not value:
+        raise argparse.ArgumentTypeError(f"expected name=value, got {text!r}")
+    return name, ast.literal_eval(value)
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--set", type=setting, action="append", default=[], metavar="NAME=VALUE",
+                        help="a TransferSolver keyword (repeatable)")
+    parser.add_argument("--level", type=int, default=2, help="Subdivision Surface level (2: 8k vertices)")
+    parser.add_argument("--rounds", type=int, default=3, help="passes over the moving frames timed")
+    args = parser.parse_args()
+    data = prepared(args.level)
+    frames, normals, ids = data["frames"], data["normals"], data["ids"]
+    keywords = dict(args.set)
+    solver = hemishadow.TransferSolver(frames[0], data["tris"], offset=float(data["offset"]), reuse=False, **keywords)
+    solver.solve(frames[1], normals[1])  # warm-up
+    times = []
+    for _ in range(args.rounds):
+        for f in range(1, len(frames)):
+            start = time.perf_counter()
+            solver.solve(frames[f], normals[f])
+            times.append(time.perf_counter() - start)
+    blockers = solver.stats["blockers_per_vertex"]
+    summaries = [reference.error_summary(solver.solve(frames[f], normals[f])[ids], data[f"T{f}"], data[f"ao{f}"])
+                 for f in EVALUATED]
+    median, mean = (100 * np.mean([s[k] for s in summaries]) for k in ("median", "mean"))
+    print(f"{keywords or 'default'}: {1000 * np.median(times):.1f} ms per solve (fastest {1000 * min(times):.1f}), "
+          f"{blockers:.0f} blockers per receiver, median error {median:.3f} %, mean {mean:.3f} %")
+
+
+if __name__ == "__main__":
+    main()
