@@ -13,6 +13,8 @@
 //! closes those slivers but was measured to over-occlude real meshes far more (spot: median
 //! error 2 % -> 8 %). Tables are built once per resolution and shared by all threads.
 
+#[cfg(target_arch = "x86_64")]
+use std::arch::x86_64::*;
 use std::sync::{Arc, Mutex};
 
 use rayon::prelude::*;
@@ -321,6 +323,39 @@ impl PlaneTable {
             let within = texel(v) * resolution + texel(u);
             out[i] = codes.of(axis, negative, within);
         }
+    }
+
+    /// `codes` for eight normals in AVX2 registers: the same operations in the same order,
+    /// so the same codes bit for bit (`max`/`min` with the bound second are the portable
+    /// clamps, NaN included).
+    #[cfg(target_arch = "x86_64")]
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    pub unsafe fn codes_avx2(&self, x: __m256, y: __m256, z: __m256) -> __m256i {
+        let sign = _mm256_set1_ps(-0.0);
+        let (ax, ay, az) = (_mm256_andnot_ps(sign, x), _mm256_andnot_ps(sign, y), _mm256_andnot_ps(sign, z));
+        let x_major = _mm256_and_ps(_mm256_cmp_ps::<_CMP_GE_OQ>(ax, ay), _mm256_cmp_ps::<_CMP_GE_OQ>(ax, az));
+        let y_major = _mm256_andnot_ps(x_major, _mm256_cmp_ps::<_CMP_GE_OQ>(ay, az));
+        let pick = |xv: __m256, yv: __m256, zv: __m256| _mm256_blendv_ps(_mm256_blendv_ps(zv, yv, y_major), xv, x_major);
+        let (major, along) = (pick(ax, ay, az), pick(x, y, z));
+        let u = _mm256_blendv_ps(x, y, x_major);
+        let v = _mm256_blendv_ps(y, z, _mm256_or_ps(x_major, y_major));
+        let half = _mm256_set1_ps(0.5 * self.resolution as f32);
+        let last = _mm256_set1_ps((self.resolution - 1) as f32);
+        let scale = _mm256_div_ps(half, major);
+        let texel = |w: __m256| {
+            let w = _mm256_add_ps(_mm256_mul_ps(w, scale), half);
+            _mm256_cvttps_epi32(_mm256_min_ps(_mm256_max_ps(w, _mm256_setzero_ps()), last))
+        };
+        let within = _mm256_add_epi32(_mm256_mullo_epi32(texel(v), _mm256_set1_epi32(self.resolution as i32)), texel(u));
+        let c = self.codes;
+        let int = |m: __m256| _mm256_castps_si256(m);
+        let stride = |a: u32| _mm256_set1_epi32((a * c.axis_stride) as i32);
+        let axis = _mm256_blendv_epi8(_mm256_blendv_epi8(stride(2), stride(1), int(y_major)), stride(0), int(x_major));
+        let negative = int(_mm256_cmp_ps::<_CMP_LT_OQ>(along, _mm256_setzero_ps()));
+        let of = |field: u32| _mm256_and_si256(negative, _mm256_set1_epi32(field as i32));
+        let code = _mm256_add_epi32(_mm256_add_epi32(axis, of(c.negative_offset)), _mm256_xor_si256(within, of(c.flip)));
+        _mm256_or_si256(code, of(c.complement))
     }
 
     /// The mask of a texel of the whole table (`texel`).

@@ -1,0 +1,151 @@
+//! `Pipeline::rasterize_packet`'s arithmetic for one packet in AVX2 registers: the corners
+//! moved into the receiver's frame, the horizon and own-triangle tests, and the table codes of
+//! the edge planes. The compiler's vectorisation of the portable loops spilled lanes to the
+//! stack and rebuilt the lane bits from scalar compares; this is the same sequence of
+//! operations lane by lane (multiplies and adds, never fused), so the codes and lanes are
+//! bit-identical to the portable path's.
+
+use std::arch::x86_64::*;
+
+use crate::integrate::Frame;
+use crate::packets::{Packet, LANES};
+use crate::plane_table::PlaneTable;
+
+use super::FLAT_CONE_SQUARED;
+
+type V3 = [__m256; 3];
+
+#[inline(always)]
+unsafe fn dot(a: V3, b: V3) -> __m256 {
+    _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(a[0], b[0]), _mm256_mul_ps(a[1], b[1])), _mm256_mul_ps(a[2], b[2]))
+}
+
+#[inline(always)]
+unsafe fn cross(a: V3, b: V3) -> V3 {
+    [
+        _mm256_sub_ps(_mm256_mul_ps(a[1], b[2]), _mm256_mul_ps(a[2], b[1])),
+        _mm256_sub_ps(_mm256_mul_ps(a[2], b[0]), _mm256_mul_ps(a[0], b[2])),
+        _mm256_sub_ps(_mm256_mul_ps(a[0], b[1]), _mm256_mul_ps(a[1], b[0])),
+    ]
+}
+
+#[inline(always)]
+unsafe fn splat(v: [f32; 3]) -> V3 {
+    v.map(|c| _mm256_set1_ps(c))
+}
+
+/// For the lanes of `packet` in `lanes`: the bit set of those to draw (a corner above the
+/// horizon, no corner `exclude`), and when there are any, the bit set of those whose cone has
+/// a solid angle, with every lane's codes in `codes` (`edge_codes`). `(0, 0)` and `codes`
+/// untouched when none is to be drawn.
+#[inline]
+#[target_feature(enable = "avx2")]
+pub unsafe fn packet_codes(
+    table: &PlaneTable,
+    origin: [f32; 3],
+    frame: &Frame,
+    packet: &Packet,
+    lanes: u32,
+    exclude: u32,
+    codes: &mut [[u32; LANES]; 3],
+) -> (u32, u32) {
+    let (o, t, b, n) = (splat(origin), splat(frame.t), splat(frame.b), splat(frame.n));
+    let corner = |k: usize| -> V3 {
+        let d: V3 = std::array::from_fn(|j| _mm256_sub_ps(_mm256_loadu_ps(packet.corners[k][j].as_ptr()), o[j]));
+        [dot(d, t), dot(d, b), dot(d, n)]
+    };
+    let (pa, pb, pc) = (corner(0), corner(1), corner(2));
+    let zero = _mm256_setzero_ps();
+    let above = _mm256_or_ps(
+        _mm256_or_ps(_mm256_cmp_ps::<_CMP_GT_OQ>(pa[2], zero), _mm256_cmp_ps::<_CMP_GT_OQ>(pb[2], zero)),
+        _mm256_cmp_ps::<_CMP_GT_OQ>(pc[2], zero),
+    );
+    let ex = _mm256_set1_epi32(exclude as i32);
+    let id = |k: usize| _mm256_cmpeq_epi32(_mm256_loadu_si256(packet.ids[k].as_ptr() as *const __m256i), ex);
+    let own = _mm256_castsi256_ps(_mm256_or_si256(_mm256_or_si256(id(0), id(1)), id(2)));
+    let keep = _mm256_movemask_ps(_mm256_andnot_ps(own, above)) as u32 & lanes;
+    if keep == 0 {
+        return (0, 0);
+    }
+    let (ab, bc, ca) = (cross(pa, pb), cross(pb, pc), cross(pc, pa));
+    let det = dot(ab, pc);
+    let scale = _mm256_mul_ps(_mm256_mul_ps(dot(pa, pa), dot(pb, pb)), dot(pc, pc));
+    let solid = _mm256_cmp_ps::<_CMP_GT_OQ>(_mm256_mul_ps(det, det), _mm256_mul_ps(_mm256_set1_ps(FLAT_CONE_SQUARED), scale));
+    // Orient the edge planes so that the opposite vertex is on their positive side: a sign
+    // flip is the portable path's multiply by -1.
+    let flip = _mm256_and_ps(_mm256_cmp_ps::<_CMP_LT_OQ>(det, zero), _mm256_set1_ps(-0.0));
+    for (e, plane) in [ab, bc, ca].into_iter().enumerate() {
+        let [x, y, z] = plane.map(|c| _mm256_xor_ps(c, flip));
+        _mm256_storeu_si256(codes[e].as_mut_ptr() as *mut __m256i, table.codes_avx2(x, y, z));
+    }
+    (keep, _mm256_movemask_ps(solid) as u32)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::packet_codes_portable;
+    use super::*;
+
+    /// xorshift32: reproducible corners without a dependency.
+    struct Corners(u32);
+
+    impl Corners {
+        fn next(&mut self) -> f32 {
+            self.0 ^= self.0 << 13;
+            self.0 ^= self.0 >> 17;
+            self.0 ^= self.0 << 5;
+            self.0 as f32 / u32::MAX as f32 * 2.0 - 1.0
+        }
+
+        /// Lane i of a packet: mostly random triangles at every scale, some tiny, some
+        /// degenerate, some through the receiver, some with a NaN or an infinite corner.
+        fn corner(&mut self, lane_kind: u32) -> [f32; 3] {
+            let p = [self.next(), self.next(), self.next()];
+            match lane_kind % 8 {
+                0 => p.map(|c| c * 1e-3 + 0.5),
+                1 => [0.0; 3],
+                2 => [p[0], f32::NAN, p[2]],
+                3 => [f32::INFINITY, p[1], p[2]],
+                4 => p.map(|c| c * 1e4),
+                _ => p,
+            }
+        }
+    }
+
+    #[test]
+    fn avx2_packet_codes_equal_the_portable_ones() {
+        if !std::is_x86_feature_detected!("avx2") {
+            return;
+        }
+        let mut rng = Corners(0x9e37_79b9);
+        for resolution in [12, 96, 128, 512] {
+            let table = PlaneTable::shared(resolution).unwrap();
+            for round in 0..50_000u32 {
+                let mut packet = Packet { corners: [[[0.0; LANES]; 3]; 3], ids: [[0; LANES]; 3], lanes: 0xff, bounds: [[0.0; 3]; 2] };
+                for i in 0..LANES {
+                    let kind = if round % 5 == 0 { rng.0 >> 3 } else { 7 };
+                    for k in 0..3 {
+                        let c = rng.corner(if k == 0 { kind } else { 7 });
+                        (0..3).for_each(|j| packet.corners[k][j][i] = c[j]);
+                        packet.ids[k][i] = rng.0 % 64;
+                    }
+                }
+                let n = {
+                    let v = [rng.next(), rng.next(), rng.next() + 2.0];
+                    let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+                    v.map(|c| c / l)
+                };
+                let (t, b) = crate::mesh::tangent_frame(n);
+                let frame = Frame { t, b, n };
+                let origin = [rng.next() * 0.1, rng.next() * 0.1, rng.next() * 0.1];
+                let (lanes, exclude) = (rng.0 & 0xff, rng.0 % 64);
+                let (mut portable, mut simd) = ([[7u32; LANES]; 3], [[7u32; LANES]; 3]);
+                let expected = packet_codes_portable(&table, origin, &frame, &packet, lanes, exclude, &mut portable);
+                // SAFETY: the CPU supports AVX2 (checked above).
+                let got = unsafe { packet_codes(&table, origin, &frame, &packet, lanes, exclude, &mut simd) };
+                assert_eq!(got, expected, "resolution {resolution}, round {round}: lanes to draw, solid lanes");
+                assert_eq!(simd, portable, "resolution {resolution}, round {round}: codes");
+            }
+        }
+    }
+}
