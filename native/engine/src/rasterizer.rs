@@ -84,10 +84,21 @@ pub fn triangle_texels(table: &PlaneTable, a: [f32; 3], b: [f32; 3], c: [f32; 3]
 pub type LocalCorners = [[[f32; LANES]; 3]; 3];
 
 /// Table codes (`PlaneTable::code`; edge ab, bc, ca) of every lane's three edge planes, and
-/// the bit set of lanes whose cone has a solid angle. Written lane-parallel and branch-free so
-/// that it compiles to vector instructions.
+/// the bit set of lanes whose cone has a solid angle. In AVX2 registers where the CPU has
+/// them (`avx2`, the same codes bit for bit).
 #[inline(always)]
 pub fn edge_codes(table: &PlaneTable, corners: &LocalCorners, codes: &mut [[u32; LANES]; 3]) -> u32 {
+    #[cfg(target_arch = "x86_64")]
+    if std::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU supports AVX2.
+        return unsafe { avx2::edge_codes(table, corners, codes) };
+    }
+    edge_codes_portable(table, corners, codes)
+}
+
+/// `edge_codes` in portable lane loops, written branch-free so that they vectorise.
+#[inline(always)]
+fn edge_codes_portable(table: &PlaneTable, corners: &LocalCorners, codes: &mut [[u32; LANES]; 3]) -> u32 {
     let [a, b, c] = corners;
     let mut planes = [[[0.0f32; LANES]; 3]; 3]; // edge ab, bc, ca; component; lane
     let mut solid = [false; LANES];
@@ -241,7 +252,7 @@ fn packet_codes_portable(
     if candidates == 0 {
         return (0, 0);
     }
-    (candidates, edge_codes(table, &local, codes))
+    (candidates, edge_codes_portable(table, &local, codes))
 }
 
 /// The corners of `packet` relative to a receiver at `origin`, in its tangent frame.

@@ -1,6 +1,6 @@
 //! `Pipeline::rasterize_packet`'s arithmetic for one packet in AVX2 registers: the corners
 //! moved into the receiver's frame, the horizon and own-triangle tests, and the table codes of
-//! the edge planes. The compiler's vectorisation of the portable loops spilled lanes to the
+//! the edge planes (`edge_codes`, also for the scene's batches). The compiler's vectorisation of the portable loops spilled lanes to the
 //! stack and rebuilt the lane bits from scalar compares; this is the same sequence of
 //! operations lane by lane (multiplies and adds, never fused), so the codes and lanes are
 //! bit-identical to the portable path's.
@@ -11,7 +11,7 @@ use crate::integrate::Frame;
 use crate::packets::{Packet, LANES};
 use crate::plane_table::PlaneTable;
 
-use super::FLAT_CONE_SQUARED;
+use super::{LocalCorners, FLAT_CONE_SQUARED};
 
 type V3 = [__m256; 3];
 
@@ -67,23 +67,39 @@ pub unsafe fn packet_codes(
     if keep == 0 {
         return (0, 0);
     }
+    (keep, solid_codes(table, [pa, pb, pc], codes))
+}
+
+/// `edge_codes` in AVX2 registers, for batches of corners already in a receiver's frame (the
+/// scene's walk).
+#[inline]
+#[target_feature(enable = "avx2")]
+pub unsafe fn edge_codes(table: &PlaneTable, corners: &LocalCorners, codes: &mut [[u32; LANES]; 3]) -> u32 {
+    let corner = |k: usize| -> V3 { std::array::from_fn(|j| _mm256_loadu_ps(corners[k][j].as_ptr())) };
+    solid_codes(table, [corner(0), corner(1), corner(2)], codes)
+}
+
+/// The codes of the three edge planes of every lane of `[a, b, c]` into `codes`, and the bit
+/// set of lanes whose cone has a solid angle (`edge_codes`).
+#[inline(always)]
+unsafe fn solid_codes(table: &PlaneTable, [pa, pb, pc]: [V3; 3], codes: &mut [[u32; LANES]; 3]) -> u32 {
     let (ab, bc, ca) = (cross(pa, pb), cross(pb, pc), cross(pc, pa));
     let det = dot(ab, pc);
     let scale = _mm256_mul_ps(_mm256_mul_ps(dot(pa, pa), dot(pb, pb)), dot(pc, pc));
     let solid = _mm256_cmp_ps::<_CMP_GT_OQ>(_mm256_mul_ps(det, det), _mm256_mul_ps(_mm256_set1_ps(FLAT_CONE_SQUARED), scale));
     // Orient the edge planes so that the opposite vertex is on their positive side: a sign
     // flip is the portable path's multiply by -1.
-    let flip = _mm256_and_ps(_mm256_cmp_ps::<_CMP_LT_OQ>(det, zero), _mm256_set1_ps(-0.0));
+    let flip = _mm256_and_ps(_mm256_cmp_ps::<_CMP_LT_OQ>(det, _mm256_setzero_ps()), _mm256_set1_ps(-0.0));
     for (e, plane) in [ab, bc, ca].into_iter().enumerate() {
         let [x, y, z] = plane.map(|c| _mm256_xor_ps(c, flip));
         _mm256_storeu_si256(codes[e].as_mut_ptr() as *mut __m256i, table.codes_avx2(x, y, z));
     }
-    (keep, _mm256_movemask_ps(solid) as u32)
+    _mm256_movemask_ps(solid) as u32
 }
 
 #[cfg(test)]
 mod tests {
-    use super::super::packet_codes_portable;
+    use super::super::{edge_codes_portable, packet_codes_portable};
     use super::*;
 
     /// xorshift32: reproducible corners without a dependency.
@@ -113,7 +129,7 @@ mod tests {
     }
 
     #[test]
-    fn avx2_packet_codes_equal_the_portable_ones() {
+    fn avx2_codes_equal_the_portable_ones() {
         if !std::is_x86_feature_detected!("avx2") {
             return;
         }
@@ -145,6 +161,11 @@ mod tests {
                 let got = unsafe { packet_codes(&table, origin, &frame, &packet, lanes, exclude, &mut simd) };
                 assert_eq!(got, expected, "resolution {resolution}, round {round}: lanes to draw, solid lanes");
                 assert_eq!(simd, portable, "resolution {resolution}, round {round}: codes");
+                // The same corners as a batch already in a receiver's frame (the scene's).
+                let expected = edge_codes_portable(&table, &packet.corners, &mut portable);
+                // SAFETY: as above.
+                let got = unsafe { edge_codes(&table, &packet.corners, &mut simd) };
+                assert_eq!((got, simd), (expected, portable), "resolution {resolution}, round {round}: edge codes");
             }
         }
     }
