@@ -193,7 +193,8 @@ impl Pipeline {
         mask: &mut Mask,
     ) -> u32 {
         let mut codes = [[0u32; LANES]; 3];
-        let (candidates, solid) = packet_codes(table, origin, frame, packet, lanes & packet.lanes, exclude, &mut codes);
+        let viewer = Viewer { origin, frame, exclude };
+        let (candidates, solid) = packet_codes(table, &viewer, packet, lanes & packet.lanes, &mut codes);
         #[cfg(feature = "census")]
         census::packet(lanes & packet.lanes, candidates);
         if candidates == 0 {
@@ -206,41 +207,33 @@ impl Pipeline {
     }
 }
 
-/// For the `lanes` of `packet` seen from a receiver at `origin` with tangent frame `frame`:
-/// the bit set of those to draw (a corner above the horizon, no corner `exclude`) and, when
+/// Where a packet is seen from: a receiver's origin and tangent frame, and its vertex, whose
+/// own triangles are not drawn.
+pub(crate) struct Viewer<'a> {
+    pub origin: [f32; 3],
+    pub frame: &'a Frame,
+    pub exclude: u32,
+}
+
+/// For the `lanes` of `packet` seen from `viewer`: the bit set of those to draw (a corner above
+/// the horizon, no corner the viewer's own vertex) and, when
 /// there are any, the bit set of those whose cone has a solid angle, with every lane's edge
 /// codes in `codes` (`edge_codes`); `(0, 0)` and `codes` untouched when none is to be drawn.
 /// In AVX2 registers where the CPU has them (`avx2`, the same results bit for bit).
 #[inline(always)]
-fn packet_codes(
-    table: &PlaneTable,
-    origin: [f32; 3],
-    frame: &Frame,
-    packet: &Packet,
-    lanes: u32,
-    exclude: u32,
-    codes: &mut [[u32; LANES]; 3],
-) -> (u32, u32) {
+fn packet_codes(table: &PlaneTable, viewer: &Viewer, packet: &Packet, lanes: u32, codes: &mut [[u32; LANES]; 3]) -> (u32, u32) {
     #[cfg(target_arch = "x86_64")]
     if std::is_x86_feature_detected!("avx2") {
         // SAFETY: the CPU supports AVX2.
-        return unsafe { avx2::packet_codes(table, origin, frame, packet, lanes, exclude, codes) };
+        return unsafe { avx2::packet_codes(table, viewer, packet, lanes, codes) };
     }
-    packet_codes_portable(table, origin, frame, packet, lanes, exclude, codes)
+    packet_codes_portable(table, viewer, packet, lanes, codes)
 }
 
 /// `packet_codes` in portable lane loops.
 #[inline(always)]
-fn packet_codes_portable(
-    table: &PlaneTable,
-    origin: [f32; 3],
-    frame: &Frame,
-    packet: &Packet,
-    lanes: u32,
-    exclude: u32,
-    codes: &mut [[u32; LANES]; 3],
-) -> (u32, u32) {
-    let local = local_corners(origin, frame, packet);
+fn packet_codes_portable(table: &PlaneTable, viewer: &Viewer, packet: &Packet, lanes: u32, codes: &mut [[u32; LANES]; 3]) -> (u32, u32) {
+    let (local, exclude) = (local_corners(viewer.origin, viewer.frame, packet), viewer.exclude);
     // Above the horizon and not the receiver's own (one lane loop, one bit gather).
     let mut keep = [false; LANES];
     for (i, keep) in keep.iter_mut().enumerate() {

@@ -7,11 +7,10 @@
 
 use std::arch::x86_64::*;
 
-use crate::integrate::Frame;
 use crate::packets::{Packet, LANES};
 use crate::plane_table::PlaneTable;
 
-use super::{LocalCorners, FLAT_CONE_SQUARED};
+use super::{LocalCorners, Viewer, FLAT_CONE_SQUARED};
 
 type V3 = [__m256; 3];
 
@@ -34,21 +33,11 @@ unsafe fn splat(v: [f32; 3]) -> V3 {
     v.map(|c| _mm256_set1_ps(c))
 }
 
-/// For the lanes of `packet` in `lanes`: the bit set of those to draw (a corner above the
-/// horizon, no corner `exclude`), and when there are any, the bit set of those whose cone has
-/// a solid angle, with every lane's codes in `codes` (`edge_codes`). `(0, 0)` and `codes`
-/// untouched when none is to be drawn.
+/// `super::packet_codes` in AVX2 registers.
 #[inline]
 #[target_feature(enable = "avx2")]
-pub unsafe fn packet_codes(
-    table: &PlaneTable,
-    origin: [f32; 3],
-    frame: &Frame,
-    packet: &Packet,
-    lanes: u32,
-    exclude: u32,
-    codes: &mut [[u32; LANES]; 3],
-) -> (u32, u32) {
+pub unsafe fn packet_codes(table: &PlaneTable, viewer: &Viewer, packet: &Packet, lanes: u32, codes: &mut [[u32; LANES]; 3]) -> (u32, u32) {
+    let Viewer { origin, frame, exclude } = *viewer;
     let (o, t, b, n) = (splat(origin), splat(frame.t), splat(frame.b), splat(frame.n));
     let corner = |k: usize| -> V3 {
         let d: V3 = std::array::from_fn(|j| _mm256_sub_ps(_mm256_loadu_ps(packet.corners[k][j].as_ptr()), o[j]));
@@ -101,6 +90,7 @@ unsafe fn solid_codes(table: &PlaneTable, [pa, pb, pc]: [V3; 3], codes: &mut [[u
 mod tests {
     use super::super::{edge_codes_portable, packet_codes_portable};
     use super::*;
+    use crate::integrate::Frame;
 
     /// xorshift32: reproducible corners without a dependency.
     struct Corners(u32);
@@ -154,11 +144,12 @@ mod tests {
                 let (t, b) = crate::mesh::tangent_frame(n);
                 let frame = Frame { t, b, n };
                 let origin = [rng.next() * 0.1, rng.next() * 0.1, rng.next() * 0.1];
-                let (lanes, exclude) = (rng.0 & 0xff, rng.0 % 64);
+                let viewer = Viewer { origin, frame: &frame, exclude: rng.0 % 64 };
+                let lanes = rng.0 & 0xff;
                 let (mut portable, mut simd) = ([[7u32; LANES]; 3], [[7u32; LANES]; 3]);
-                let expected = packet_codes_portable(&table, origin, &frame, &packet, lanes, exclude, &mut portable);
+                let expected = packet_codes_portable(&table, &viewer, &packet, lanes, &mut portable);
                 // SAFETY: the CPU supports AVX2 (checked above).
-                let got = unsafe { packet_codes(&table, origin, &frame, &packet, lanes, exclude, &mut simd) };
+                let got = unsafe { packet_codes(&table, &viewer, &packet, lanes, &mut simd) };
                 assert_eq!(got, expected, "resolution {resolution}, round {round}: lanes to draw, solid lanes");
                 assert_eq!(simd, portable, "resolution {resolution}, round {round}: codes");
                 // The same corners as a batch already in a receiver's frame (the scene's).
