@@ -133,10 +133,11 @@ fn lane_bits(lanes: &[bool; LANES]) -> u32 {
     (u64::from_le_bytes(bytes).wrapping_mul(0x0102_0408_1020_4080) >> 56) as u32
 }
 
-/// ORs triangles into a mask with the table fetches pipelined: the fetches are what the
-/// kernel waits on, so the masks of one packet are prefetched when its texels are known and
-/// OR-ed only when the next packet's texels are (or at `drain`), by which time they have
-/// arrived.
+/// ORs triangles into a mask with the table fetches pipelined: the masks of one packet are
+/// prefetched when its texels are known and OR-ed only when the next packet's texels are (or
+/// at `drain`), by which time they have arrived. On an AMD EPYC the fetches were what the
+/// kernel waited on; on a Xeon with 2 MiB of L2 per core, the instructions of the drain are
+/// (docs/solver_speed.md).
 #[derive(Default)]
 pub struct Pipeline {
     /// Table codes (`PlaneTable::code`) of the previous packet (`[edge][lane]`) and its kept
