@@ -216,11 +216,11 @@ pub(crate) struct Viewer<'a> {
     pub exclude: u32,
 }
 
-/// For the `lanes` of `packet` seen from `viewer`: the bit set of those to draw (a corner above
-/// the horizon, no corner the viewer's own vertex) and, when
-/// there are any, the bit set of those whose cone has a solid angle, with every lane's edge
-/// codes in `codes` (`edge_codes`); `(0, 0)` and `codes` untouched when none is to be drawn.
-/// In AVX2 registers where the CPU has them (`avx2`, the same results bit for bit).
+/// For the `lanes` of `packet` seen from `viewer`: the bit set of those to draw (a corner
+/// above the horizon, no corner the viewer's own vertex) and, when there are any, the bit set
+/// of those whose cone has a solid angle, with every lane's edge codes in `codes`
+/// (`edge_codes`); `(0, 0)` and `codes` untouched when none is to be drawn. In AVX2 registers
+/// where the CPU has them (`avx2`, the same results bit for bit).
 #[inline(always)]
 fn packet_codes(table: &PlaneTable, viewer: &Viewer, packet: &Packet, lanes: u32, codes: &mut [[u32; LANES]; 3]) -> (u32, u32) {
     #[cfg(target_arch = "x86_64")]
