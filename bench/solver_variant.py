@@ -26,9 +26,12 @@ sys.path.insert(0, str(HERE))
 sys.path.insert(0, str(HERE.parent / "tests"))
 
 import hemishadow  # noqa: E402
+import peers  # noqa: E402
 import reference  # noqa: E402
+import run  # noqa: E402
+import scenes  # noqa: E402
 
-EVALUATED = (2, 5)
+EVALUATED = run.FULL["eval_frames"]
 CACHE = HERE.parent / "out" / "solver_variant"
 
 
@@ -36,16 +39,12 @@ def prepared(level):
     """The mesh, its frames and the reference of the evaluated frames, cached per level."""
     path = CACHE / f"suzanne_{level}.npz"
     if not path.exists():
-        import peers
-        import scenes
-
-        frames, tris = scenes.suzanne(level, n_frames=7)
-        tris64 = tris.astype(np.int64)
-        normals = np.stack([reference.vertex_normals(f, tris64) for f in frames]).astype(np.float32)
-        offset = 1e-3 * reference.mean_edge_length(frames[0], tris64)
-        ids = np.sort(np.random.default_rng(12345).choice(frames.shape[1], 500, replace=False))
+        frames, tris = scenes.suzanne(level, n_frames=run.FULL["frames"])
+        tris64, normals, offset = run.prepared(frames, tris)
+        ids = np.sort(np.random.default_rng(12345).choice(frames.shape[1], run.FULL["receivers"], replace=False))
         with peers.EmbreePool() as pool:
-            refs = {f: pool.reference(frames[f], tris64, normals[f], offset, 128, 1000 * f, ids) for f in EVALUATED}
+            refs = {f: pool.reference(frames[f], tris64, normals[f], offset, run.FULL["reference_side"], 1000 * f, ids)
+                    for f in EVALUATED}
         CACHE.mkdir(parents=True, exist_ok=True)
         part = path.with_name(path.stem + ".part.npz")
         np.savez(part, frames=frames, tris=tris, normals=normals, offset=offset, ids=ids,
