@@ -23,6 +23,8 @@ use crate::disk_mask::{cell_direction, Mask, MASK_SIDE, MASK_WORDS};
 use crate::error::{Error, Result};
 use crate::large_pages::LargePageVec;
 
+mod drain;
+
 /// The paper's 6 x 128 x 128 texels (12 MiB, of which 6 are stored). 64 (a quarter of the
 /// memory) measured 1.06-1.7x faster for +0.03 to +0.33 percentage points of median error
 /// (docs/benchmarks.md), but its coarser planes double the worst per-vertex change under

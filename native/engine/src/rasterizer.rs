@@ -168,13 +168,7 @@ impl Pipeline {
     /// ORs every pending triangle into `mask`.
     #[inline(always)]
     pub fn drain(&mut self, table: &PlaneTable, mask: &mut Mask) {
-        let [ab, bc, ca] = &self.pending;
-        let mut bits = self.pending_lanes;
-        while bits != 0 {
-            let i = bits.trailing_zeros() as usize;
-            bits &= bits - 1;
-            mask.or_assign(&table.triangle_of_codes([ab[i], bc[i], ca[i]]));
-        }
+        table.or_triangles(&self.pending, self.pending_lanes, mask);
         self.pending_lanes = 0;
     }
 
