@@ -8,6 +8,10 @@
 //!
 //! `PROFILE_SOLVES=N` times exactly N solves (for instruction counts under valgrind, which
 //! are steady where times on a shared machine are not); by default, up to 100 in 5 s.
+//!
+//! `PROFILE_AGAINST="downsample table near_scale coarse"` (the same optional arguments) builds
+//! a second solver and alternates the two solve by solve, printing both: on a shared machine
+//! whose speed drifts by tens of percent within minutes, only such pairs compare settings.
 
 use std::time::Instant;
 
@@ -34,18 +38,52 @@ fn cpu_ms() -> f64 {
     (ticks(11) + ticks(12)) * 10.0 // utime, stime in 1/100 s
 }
 
+/// A warm solver (one solve done) with the optional arguments `[downsample] [table]
+/// [near_scale] [coarse triangles]`, reuse off.
+fn warm_solver(frames: &[Vec<[f32; 3]>], triangles: &[[u32; 3]], args: &[String]) -> Solver {
+    let arg = |i: usize| args.get(i).map(|s| s.parse::<f32>().unwrap());
+    let settings = Settings {
+        downsample: arg(0).map(|d| d as usize),
+        table_resolution: arg(1).map_or(Settings::default().table_resolution, |t| t as usize),
+        ..Settings::default()
+    };
+    let near_scale = arg(2).unwrap_or(Blockers::default().near_scale);
+    let blockers = Blockers { reuse: false, coarse_triangles: arg(3).map(|c| c as usize), near_scale, ..Blockers::default() };
+    let mut solver = Solver::new(&frames[0], triangles, &settings, blockers).unwrap();
+    solver.solve(&frames[1], None, None).unwrap();
+    solver
+}
+
+/// Solves `solvers` in turn, `rounds` times, and prints each one's times.
+fn alternate(frames: &[Vec<[f32; 3]>], solvers: &mut [(String, Solver)], rounds: usize) {
+    let mut times = vec![Vec::new(); solvers.len()];
+    for round in 0..rounds {
+        let frame = &frames[1 + round % (frames.len() - 1)];
+        for ((_, solver), times) in solvers.iter_mut().zip(&mut times) {
+            let t = Instant::now();
+            solver.solve(frame, None, None).unwrap();
+            times.push(t.elapsed().as_secs_f64() * 1e3);
+        }
+    }
+    for ((name, solver), mut t) in solvers.iter().zip(times) {
+        t.sort_by(f64::total_cmp);
+        let blockers = solver.stats().blockers_per_receiver;
+        println!("[{name}]: fastest {:.2} ms, tenth percentile {:.2}, median {:.2} over {rounds} solves, {blockers:.0} blockers per receiver", t[0], t[t.len() / 10], t[t.len() / 2]);
+    }
+}
+
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     let (frames, triangles) = read_mesh(&args[1]);
-    let arg = |i: usize| args.get(i).map(|s| s.parse::<f32>().unwrap());
-    let settings = Settings {
-        downsample: arg(2).map(|d| d as usize),
-        table_resolution: arg(3).map_or(Settings::default().table_resolution, |t| t as usize),
-        ..Settings::default()
-    };
-    let blockers = Blockers { reuse: false, coarse_triangles: arg(5).map(|c| c as usize), near_scale: arg(4).unwrap_or(Blockers::default().near_scale), ..Blockers::default() };
-    let mut solver = Solver::new(&frames[0], &triangles, &settings, blockers).unwrap();
-    solver.solve(&frames[1], None, None).unwrap();
+    let mut solver = warm_solver(&frames, &triangles, &args[2..]);
+    if let Ok(against) = std::env::var("PROFILE_AGAINST") {
+        let other: Vec<String> = against.split_whitespace().map(String::from).collect();
+        let other = warm_solver(&frames, &triangles, &other);
+        let rounds = std::env::var("PROFILE_SOLVES").ok().and_then(|n| n.parse().ok()).unwrap_or(40);
+        let name = if args.len() > 2 { args[2..].join(" ") } else { "default".into() };
+        alternate(&frames, &mut [(name, solver), (against, other)], rounds);
+        return;
+    }
     let mut times = Vec::new();
     let start = Instant::now();
     let cpu_start = cpu_ms();
