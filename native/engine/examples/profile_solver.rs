@@ -76,18 +76,17 @@ fn main() {
     let args: Vec<String> = std::env::args().collect();
     let (frames, triangles) = read_mesh(&args[1]);
     let mut solver = warm_solver(&frames, &triangles, &args[2..]);
+    let solves = std::env::var("PROFILE_SOLVES").ok().and_then(|n| n.parse::<usize>().ok());
     if let Ok(against) = std::env::var("PROFILE_AGAINST") {
         let other: Vec<String> = against.split_whitespace().map(String::from).collect();
         let other = warm_solver(&frames, &triangles, &other);
-        let rounds = std::env::var("PROFILE_SOLVES").ok().and_then(|n| n.parse().ok()).unwrap_or(40);
         let name = if args.len() > 2 { args[2..].join(" ") } else { "default".into() };
-        alternate(&frames, &mut [(name, solver), (against, other)], rounds);
+        alternate(&frames, &mut [(name, solver), (against, other)], solves.unwrap_or(40));
         return;
     }
     let mut times = Vec::new();
     let start = Instant::now();
     let cpu_start = cpu_ms();
-    let solves = std::env::var("PROFILE_SOLVES").ok().and_then(|n| n.parse::<usize>().ok());
     while match solves {
         Some(n) => times.len() < n,
         None => times.len() < 5 || (start.elapsed().as_secs_f32() < 5.0 && times.len() < 100),

@@ -32,3 +32,15 @@ pub use integrate::Brdf;
 pub use progress::Progress;
 pub use solver::{Blockers, Solver, Stats};
 pub use transfer::{transfer, transfer_with_progress, Output, Settings, View};
+
+/// Reproducible random numbers for tests, without a dependency.
+#[cfg(test)]
+pub(crate) mod test_random {
+    /// One step of xorshift32 (Marsaglia 2003); `state` must not be 0.
+    pub(crate) fn xorshift32(state: &mut u32) -> u32 {
+        *state ^= *state << 13;
+        *state ^= *state >> 17;
+        *state ^= *state << 5;
+        *state
+    }
+}

@@ -395,6 +395,18 @@ impl PlaneTable {
         }
     }
 
+    /// The stored mask of a code (`code`), before its complement flip.
+    #[inline(always)]
+    fn stored(&self, code: u32) -> &Mask {
+        &self.masks[(code & !COMPLEMENT) as usize]
+    }
+
+    /// The disk's cells: the flip of a complemented code.
+    #[inline(always)]
+    fn disk(&self) -> &Mask {
+        &self.flips[1]
+    }
+
     /// The mask of a triangle whose three edge planes have these codes: theirs AND-ed.
     #[inline(always)]
     pub fn triangle_of_codes(&self, [ab, bc, ca]: [u32; 3]) -> Mask {
@@ -404,7 +416,7 @@ impl PlaneTable {
     /// The mask of a code (`code`): `mask_at` of its texel.
     #[inline(always)]
     pub fn mask_of_code(&self, code: u32) -> Mask {
-        let stored = &self.masks[(code & !COMPLEMENT) as usize];
+        let stored = self.stored(code);
         let flip = &self.flips[(code >> COMPLEMENT.trailing_zeros()) as usize];
         Mask(std::array::from_fn(|w| stored.0[w] ^ flip.0[w]))
     }

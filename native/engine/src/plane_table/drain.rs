@@ -11,7 +11,7 @@
 #[cfg(target_arch = "x86_64")]
 use std::arch::x86_64::*;
 
-use super::{PlaneTable, COMPLEMENT};
+use super::PlaneTable;
 use crate::disk_mask::Mask;
 use crate::packets::LANES;
 
@@ -37,12 +37,6 @@ impl PlaneTable {
         }
     }
 
-    /// Where a code's stored mask is (bounds-checked: codes are only ever read through this).
-    #[inline(always)]
-    fn stored(&self, code: u32) -> *const Mask {
-        &self.masks[(code & !COMPLEMENT) as usize]
-    }
-
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
     unsafe fn or_triangles_avx2(&self, codes: &[[u32; LANES]; 3], lanes: u32, mask: &mut Mask) {
@@ -54,7 +48,7 @@ impl PlaneTable {
             bits &= bits - 1;
             let edge = |e: usize| {
                 let code = codes[e][i];
-                (self.stored(code) as *const __m256i, _mm256_set1_epi32((code as i32) >> 31))
+                (self.stored(code) as *const Mask as *const __m256i, _mm256_set1_epi32((code as i32) >> 31))
             };
             let [(a, fa), (b, fb), (c, fc)] = [edge(0), edge(1), edge(2)];
             for (w, acc) in acc.iter_mut().enumerate() {
@@ -64,7 +58,7 @@ impl PlaneTable {
                 *acc = _mm256_or_si256(*acc, _mm256_and_si256(_mm256_and_si256(x, y), z));
             }
         }
-        let (disk, out) = (self.flips[1].0.as_ptr() as *const __m256i, mask.0.as_mut_ptr() as *mut __m256i);
+        let (disk, out) = (self.disk().0.as_ptr() as *const __m256i, mask.0.as_mut_ptr() as *mut __m256i);
         for (w, acc) in acc.into_iter().enumerate() {
             let inside = _mm256_and_si256(acc, _mm256_load_si256(disk.add(w)));
             _mm256_store_si256(out.add(w), _mm256_or_si256(_mm256_load_si256(out.add(w)), inside));
@@ -76,14 +70,7 @@ impl PlaneTable {
 mod tests {
     use super::*;
     use crate::disk_mask::disk;
-
-    /// xorshift32: reproducible codes without a dependency.
-    fn next(state: &mut u32) -> u32 {
-        *state ^= *state << 13;
-        *state ^= *state >> 17;
-        *state ^= *state << 5;
-        *state
-    }
+    use crate::test_random::xorshift32 as next;
 
     #[test]
     fn stored_masks_lie_within_the_disk() {

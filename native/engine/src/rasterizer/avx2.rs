@@ -92,15 +92,12 @@ mod tests {
     use super::*;
     use crate::integrate::Frame;
 
-    /// xorshift32: reproducible corners without a dependency.
+    /// Reproducible random corners (`test_random`).
     struct Corners(u32);
 
     impl Corners {
         fn next(&mut self) -> f32 {
-            self.0 ^= self.0 << 13;
-            self.0 ^= self.0 >> 17;
-            self.0 ^= self.0 << 5;
-            self.0 as f32 / u32::MAX as f32 * 2.0 - 1.0
+            crate::test_random::xorshift32(&mut self.0) as f32 / u32::MAX as f32 * 2.0 - 1.0
         }
 
         /// Lane i of a packet: mostly random triangles at every scale, some tiny, some
