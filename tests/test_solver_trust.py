@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 import hemishadow
-from meshes import MESHES, load_asset
+from meshes import MESHES, grid, load_asset
 from reference import relative_l2_errors
 
 BANDS = 3  # AO is T_0; the hierarchy does not depend on the band count
@@ -96,8 +96,7 @@ def test_potentially_visible_sets_keep_the_bound(animations, exact_animations, n
     frame stays within 0.1 AO of the exact path, and frames far from the samples fall back."""
     triangles, frames = animations[name]
     poses = np.array([v for _, _, v in frames])
-    # The sets replace the group tree's proxies: sampled frames equal the two levels' result.
-    full = hemishadow.TransferSolver(poses[0], triangles, bands=BANDS, reuse=False, far_lod=0)
+    full = hemishadow.TransferSolver(poses[0], triangles, bands=BANDS, reuse=False)
     pvs = hemishadow.TransferSolver(poses[0], triangles, bands=BANDS, reuse=False)
     sampled = list(range(0, len(poses), 4))
     pvs.build_pvs(poses[sampled])
@@ -136,6 +135,33 @@ def test_pvs_input_is_checked():
     assert solver.pvs is None
     with pytest.raises(ValueError, match="normals"):
         solver.build_pvs(v[None], v[None, :5])
+
+
+def test_pvs_keep_distant_proxies_and_draw_them_whole_up_close():
+    """A ceiling far above a floor is drawn through its proxy: in the sampled pose the sets
+    give the full hierarchy's result bit for bit. Lowered close (the sets forced on that
+    pose), the walk opens the ceiling, whose clusters were never candidates: the sets must
+    draw all of it (without, the floor's median AO is 0.38 too high)."""
+    floor_v, floor_t = grid(1.0, 30)
+    ceiling_v, ceiling_t = grid(1.0, 30, facing_down=True)
+    triangles = np.concatenate([floor_t, ceiling_t + len(floor_v)]).astype(np.uint32)
+
+    def pose(height):
+        return np.concatenate([floor_v, ceiling_v + [0.0, 0.0, height]]).astype(np.float32)
+
+    far, close = pose(6.0), pose(1.0)
+    full = hemishadow.TransferSolver(far, triangles, bands=BANDS, reuse=False)
+    two_levels = hemishadow.TransferSolver(far, triangles, bands=BANDS, reuse=False, far_lod=0)
+    pvs = hemishadow.TransferSolver(far, triangles, bands=BANDS, reuse=False)
+    pvs.build_pvs(far[None], tolerance=1e9)
+    expected = full.solve(far)
+    np.testing.assert_array_equal(pvs.solve(far), expected)
+    assert not np.array_equal(two_levels.solve(far), expected)  # the proxies were drawn
+    lowered = ao(pvs.solve(close)) - ao(full.solve(close))
+    assert pvs.stats["pvs"]
+    assert ao(full.solve(close))[: len(floor_v)].mean() < 0.7  # the lowered ceiling shadows the floor
+    assert lowered.min() >= -1e-6  # the sets only ever leave blockers out
+    assert np.median(lowered[: len(floor_v)]) < 0.01
 
 
 def test_pvs_with_given_normals_matches_solves_given_them():

@@ -36,9 +36,18 @@ pub struct GroupNode {
     pub end: u32,
     /// Children, or `LEAF` for a single group.
     pub children: [u32; 2],
+    /// The nodes below it are `id + 1..subtree_end` (pre-order).
+    pub subtree_end: u32,
 }
 
 pub const LEAF: [u32; 2] = [u32::MAX; 2];
+
+impl GroupNode {
+    /// The clusters of its groups, of `clusters` in all.
+    pub fn clusters(&self, clusters: usize) -> std::ops::Range<usize> {
+        self.first as usize * GROUP..(self.end as usize * GROUP).min(clusters)
+    }
+}
 
 pub struct GroupTree {
     /// Node 0 is the root; parents come before their children.
@@ -59,8 +68,7 @@ impl GroupTree {
                 if n.children == LEAF {
                     return Vec::new();
                 }
-                let clusters = n.first as usize * GROUP..(n.end as usize * GROUP).min(hierarchy.clusters());
-                simplify(positions, &hierarchy.coarse[clusters], PROXY_TRIANGLES).0
+                simplify(positions, &hierarchy.coarse[n.clusters(hierarchy.clusters())], PROXY_TRIANGLES).0
             })
             .collect();
         GroupTree { nodes, proxies: PacketLists::new(proxies.iter().map(|p| &p[..])) }
@@ -88,20 +96,26 @@ impl GroupTree {
 /// `far_lod` (given squared) x its distance.
 #[inline(always)]
 pub fn is_far(b: &[Vec3; 2], origin: Vec3, lod2: f32) -> bool {
-    let d2: f32 = (0..3).map(|a| (0.5 * (b[0][a] + b[1][a]) - origin[a]).powi(2)).sum();
     let r2: f32 = (0..3).map(|a| (0.5 * (b[1][a] - b[0][a])).powi(2)).sum();
-    r2 < lod2 * d2
+    r2 < lod2 * centre_distance2(b, origin)
+}
+
+/// The squared distance from `origin` to the centre of box `b`.
+#[inline(always)]
+pub fn centre_distance2(b: &[Vec3; 2], origin: Vec3) -> f32 {
+    (0..3).map(|a| (0.5 * (b[0][a] + b[1][a]) - origin[a]).powi(2)).sum()
 }
 
 /// Halves `first..end` down to single groups; appends nodes in pre-order, returns the root.
 fn split(first: u32, end: u32, nodes: &mut Vec<GroupNode>) -> u32 {
     let id = nodes.len() as u32;
-    nodes.push(GroupNode { first, end, children: LEAF });
+    nodes.push(GroupNode { first, end, children: LEAF, subtree_end: id + 1 });
     if end - first > 1 {
         let mid = first + (end - first) / 2;
         let left = split(first, mid, nodes);
         let right = split(mid, end, nodes);
         nodes[id as usize].children = [left, right];
+        nodes[id as usize].subtree_end = nodes.len() as u32;
     }
     id
 }
@@ -119,6 +133,9 @@ mod tests {
         let leaves: Vec<u32> = tree.nodes.iter().filter(|n| n.children == LEAF).map(|n| n.first).collect();
         assert_eq!(leaves, (0..h.groups() as u32).collect::<Vec<_>>());
         for (n, node) in tree.nodes.iter().enumerate() {
+            let below = &tree.nodes[n + 1..node.subtree_end as usize];
+            assert!(below.iter().all(|b| node.first <= b.first && b.end <= node.end));
+            assert_eq!(below.len(), if node.children == LEAF { 0 } else { 2 * (node.end - node.first) as usize - 2 });
             let proxy: u32 = tree.proxies.of(n).iter().map(|p| p.lanes.count_ones()).sum();
             if node.children == LEAF {
                 assert_eq!(proxy, 0);

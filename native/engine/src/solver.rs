@@ -13,7 +13,7 @@ use rayon::prelude::*;
 
 use crate::disk_mask::{disk, Mask};
 use crate::error::{Error, Result};
-use crate::group_tree::{is_far, GroupTree, FAR_LOD, LEAF};
+use crate::group_tree::{centre_distance2, is_far, GroupTree, FAR_LOD, LEAF};
 use crate::hierarchy::{default_coarse_triangles, morton_permutation, Hierarchy, GROUP};
 use crate::integrate::{Brdf, Quadrature};
 use crate::mesh::{box_of, check_finite, weld, welded_normals, Normalization, Vec3};
@@ -343,12 +343,12 @@ impl Solver {
             let mut rows = vec![0.0f32; frame.positions.len()];
             let slots: Vec<std::sync::Mutex<Vec<u32>>> = needed.iter_mut().map(|v| std::sync::Mutex::new(std::mem::take(v))).collect();
             par_rows(&mut rows, 1, &mut fraction, || (), |r, _, _| {
-                *slots[r].lock().unwrap_or_else(|e| e.into_inner()) = self.contributing_clusters(r, &frame);
+                *slots[r].lock().unwrap_or_else(|e| e.into_inner()) = self.contributing_units(r, &frame);
             })?;
             per_pose.push(slots.into_iter().map(|m| m.into_inner().unwrap_or_else(|e| e.into_inner())).collect());
             welded_poses.push(frame.positions);
         }
-        self.pvs = Some(Pvs::new(per_pose, welded_poses, tolerance));
+        self.pvs = Some(Pvs::new(per_pose, welded_poses, self.hierarchy.clusters() as u32, tolerance));
         self.last = None;
         Ok(())
     }
@@ -362,41 +362,64 @@ impl Solver {
         self.pvs.as_ref()
     }
 
-    /// The clusters that contribute to receiver `r`'s mask in this frame (see `pvs.rs`), its
-    /// ring always included.
-    fn contributing_clusters(&self, r: usize, frame: &Frame) -> Vec<u32> {
+    /// The units (clusters and proxies, `pvs.rs`) that contribute to receiver `r`'s mask in
+    /// this frame, its ring always included: the walk of `own_mask`, each unit's mask apart.
+    fn contributing_units(&self, r: usize, frame: &Frame) -> Vec<u32> {
         let mut kept = self.hierarchy.near_of(r).to_vec();
         let Some(receiver) = Receiver::new(frame.positions[r], frame.normals[r], self.offset) else { return kept };
-        let (h, table) = (&self.hierarchy, &*self.table);
+        let (tree, table, origin) = (&self.group_tree, &*self.table, receiver.origin);
+        let (lod2, node_unit) = (self.far_lod2(), |n: usize| (self.hierarchy.clusters() + n) as u32);
         let mut candidates = Vec::new();
-        for g in 0..h.groups() {
-            let first = g * GROUP;
-            let clusters = (first + GROUP).min(h.clusters()) - first;
-            if self.blockers.cull && receiver.below_horizon(&frame.group_bounds[g]) {
+        let mut stack: Vec<u32> = if tree.nodes.is_empty() { Vec::new() } else { vec![0] };
+        while let Some(n) = stack.pop() {
+            let (n, bounds) = (n as usize, &frame.node_bounds[n as usize]);
+            let node = tree.nodes[n];
+            if self.blockers.cull && receiver.below_horizon(bounds) {
                 continue;
             }
-            let expanded = self.expanded_clusters(r, &receiver, frame, first, clusters);
-            for i in 0..clusters {
-                let c = first + i;
+            if node.children == LEAF {
+                self.cluster_candidates(node.first as usize, r, &receiver, frame, &mut candidates);
+            } else if is_far(bounds, origin, lod2) {
                 let (mut mask, mut pipeline) = (Mask::EMPTY, Pipeline::default());
-                if expanded >> i & 1 == 1 {
-                    for packet in self.fine_packets.of(c) {
-                        pipeline.rasterize_packet(table, receiver.origin, &receiver.frame, packet, u32::MAX, r as u32, &mut mask);
-                    }
-                } else {
-                    let packet = &self.coarse_packets.of(g)[i / LANES];
-                    pipeline.rasterize_packet(table, receiver.origin, &receiver.frame, packet, 1 << (i % LANES), r as u32, &mut mask);
+                for packet in tree.proxies.of(n) {
+                    pipeline.rasterize_packet(table, origin, &receiver.frame, packet, u32::MAX, r as u32, &mut mask);
                 }
                 pipeline.drain(table, &mut mask);
                 if mask != Mask::EMPTY {
-                    let s = frame.spheres[c];
-                    let d2 = [0, 1, 2].map(|a| s[a] - receiver.origin[a]).iter().map(|d| d * d).sum::<f32>();
-                    candidates.push((d2, c as u32, mask));
+                    candidates.push((centre_distance2(bounds, origin), node_unit(n), mask));
                 }
+            } else {
+                stack.extend_from_slice(&node.children);
             }
         }
         kept.extend(contributing(candidates));
         kept
+    }
+
+    /// Each cluster of group `g` that draws anything for receiver `r`, as a candidate unit.
+    fn cluster_candidates(&self, g: usize, r: usize, receiver: &Receiver, frame: &Frame, candidates: &mut Vec<(f32, u32, Mask)>) {
+        let (h, table) = (&self.hierarchy, &*self.table);
+        let first = g * GROUP;
+        let clusters = (first + GROUP).min(h.clusters()) - first;
+        let expanded = self.expanded_clusters(r, receiver, frame, first, clusters);
+        for i in 0..clusters {
+            let c = first + i;
+            let (mut mask, mut pipeline) = (Mask::EMPTY, Pipeline::default());
+            if expanded >> i & 1 == 1 {
+                for packet in self.fine_packets.of(c) {
+                    pipeline.rasterize_packet(table, receiver.origin, &receiver.frame, packet, u32::MAX, r as u32, &mut mask);
+                }
+            } else {
+                let packet = &self.coarse_packets.of(g)[i / LANES];
+                pipeline.rasterize_packet(table, receiver.origin, &receiver.frame, packet, 1 << (i % LANES), r as u32, &mut mask);
+            }
+            pipeline.drain(table, &mut mask);
+            if mask != Mask::EMPTY {
+                let s = frame.spheres[c];
+                let d2 = [0, 1, 2].map(|a| s[a] - receiver.origin[a]).iter().map(|d| d * d).sum::<f32>();
+                candidates.push((d2, c as u32, mask));
+            }
+        }
     }
 
     /// Bits of the clusters `first..first + clusters` that receiver `r` sees at full
@@ -486,7 +509,7 @@ impl Solver {
     /// that moved except below its horizon in both frames: then its blockers are the same.
     fn same_walk(&self, receiver: &Receiver, frame: &Frame, last: &LastFrame, group_moved: &[bool], node_moved: &[bool]) -> bool {
         let tree = &self.group_tree;
-        let lod2 = self.far_lod2(frame);
+        let lod2 = self.far_lod2();
         let far = |b: &[Vec3; 2]| is_far(b, receiver.origin, lod2);
         let mut stack = vec![0u32];
         while let Some(n) = stack.pop() {
@@ -576,26 +599,32 @@ impl Solver {
     /// ones drawn through their proxies; per group reached: the coarse triangles of the
     /// clusters seen from afar, then the fine packets of the clusters seen at full resolution
     /// (the receiver's ring and clusters close to it), each packet skipped when its box is
-    /// below the horizon.
+    /// below the horizon. With potentially visible sets, also skipped: every node that holds
+    /// no unit the receiver keeps (`pvs.rs`), unless a node above it is kept whole.
     #[inline(always)]
     fn own_mask_portable(&self, r: usize, frame: &Frame, receiver: &Receiver) -> (Mask, u64) {
         let (tree, table, origin) = (&self.group_tree, &*self.table, receiver.origin);
+        let pvs = self.pvs.as_ref().filter(|_| frame.use_pvs);
         let mut mask = Mask::EMPTY;
         let mut pipeline = Pipeline::default();
         let mut rasterized = 0u32;
-        let lod2 = self.far_lod2(frame);
+        let lod2 = self.far_lod2();
         let mut stack: Vec<u32> = Vec::with_capacity(64);
         if !tree.nodes.is_empty() {
             stack.push(0);
         }
-        while let Some(n) = stack.pop() {
-            let n = n as usize;
+        while let Some(entry) = stack.pop() {
+            let (n, whole) = ((entry & !WHOLE) as usize, entry & WHOLE);
             let node = tree.nodes[n];
             if self.blockers.cull && receiver.below_horizon(&frame.node_bounds[n]) {
                 continue;
             }
+            let sets = pvs.filter(|_| whole == 0);
+            if sets.is_some_and(|pvs| !self.keeps_below(pvs, r, n)) {
+                continue;
+            }
             if node.children == LEAF {
-                rasterized += self.group_blockers(node.first as usize, r, frame, receiver, &mut pipeline, &mut mask);
+                rasterized += self.group_blockers(node.first as usize, r, sets, frame, receiver, &mut pipeline, &mut mask);
                 if mask == self.disk {
                     break;
                 }
@@ -606,28 +635,42 @@ impl Solver {
                     rasterized += pipeline.rasterize_packet(table, origin, &receiver.frame, packet, u32::MAX, r as u32, &mut mask);
                 }
             } else {
-                stack.extend_from_slice(&[node.children[1], node.children[0]]); // in group order
+                let proxy_kept = sets.is_some_and(|pvs| pvs.keeps_any(r, pvs.node_unit(n)..pvs.node_unit(n + 1)));
+                let whole = if proxy_kept { WHOLE } else { whole };
+                stack.extend_from_slice(&[node.children[1] | whole, node.children[0] | whole]); // in group order
             }
         }
         pipeline.drain(table, &mut mask);
         (mask, rasterized as u64)
     }
 
-    /// The square of the group tree's `far_lod` in this frame; 0 (every group opened) without
-    /// the hierarchy or with the potentially visible sets, which are per cluster. One place
-    /// for the walk and for `same_walk`, whose reuse is only sound when they agree.
+    /// Whether receiver `r` keeps a unit of node `n` or below it: its proxy, a node's below
+    /// it, or one of its clusters.
     #[inline(always)]
-    fn far_lod2(&self, frame: &Frame) -> f32 {
-        if frame.use_pvs || !self.blockers.hierarchy { 0.0 } else { self.blockers.far_lod.powi(2) }
+    fn keeps_below(&self, pvs: &Pvs, r: usize, n: usize) -> bool {
+        let node = self.group_tree.nodes[n];
+        let clusters = node.clusters(self.hierarchy.clusters());
+        pvs.keeps_any(r, pvs.node_unit(n)..pvs.node_unit(node.subtree_end as usize))
+            || pvs.keeps_any(r, clusters.start as u32..clusters.end as u32)
+    }
+
+    /// The square of the group tree's `far_lod`; 0 (every group opened) without the
+    /// hierarchy. One place for the walk, the potentially visible sets' walk and `same_walk`,
+    /// whose reuse is only sound when they agree.
+    #[inline(always)]
+    fn far_lod2(&self) -> f32 {
+        if !self.blockers.hierarchy { 0.0 } else { self.blockers.far_lod.powi(2) }
     }
 
     /// Group `g`'s blockers for receiver `r`: see `own_mask_portable`.
+    /// `sets`: the potentially visible sets, when they choose the group's clusters.
+    #[allow(clippy::too_many_arguments)]
     #[inline(always)]
-    fn group_blockers(&self, g: usize, r: usize, frame: &Frame, receiver: &Receiver, pipeline: &mut Pipeline, mask: &mut Mask) -> u32 {
+    fn group_blockers(&self, g: usize, r: usize, sets: Option<&Pvs>, frame: &Frame, receiver: &Receiver, pipeline: &mut Pipeline, mask: &mut Mask) -> u32 {
         let (h, table, origin) = (&self.hierarchy, &*self.table, receiver.origin);
         let first = g * GROUP;
         let clusters = (first + GROUP).min(h.clusters()) - first;
-        let seen = self.pvs.as_ref().filter(|_| frame.use_pvs).map_or(u32::MAX, |pvs| bits_of(pvs.of(r), first, clusters));
+        let seen = sets.map_or(u32::MAX, |pvs| bits_of(pvs.of(r), first, clusters));
         if seen == 0 || (self.blockers.cull && receiver.below_horizon(&frame.group_bounds[g])) {
             return 0;
         }
@@ -673,6 +716,10 @@ fn snapped(positions: &[Vec3], triangles: &[[u32; 3]]) -> Vec<Vec3> {
     let snap = |p: &Vec3| p.map(|c| (c * 1024.0).round() / 1024.0);
     positions.iter().zip(used).map(|(p, used)| if used { snap(p) } else { [0.0; 3] }).collect()
 }
+
+/// Marks a node of the walk's stack kept whole by the potentially visible sets: its proxy was
+/// kept in a sampled pose where it was drawn from afar, so all below it is drawn here.
+const WHOLE: u32 = 1 << 31;
 
 /// Bits (relative to `first`) of the entries of the ascending `list` in `first..first + count`.
 #[inline(always)]

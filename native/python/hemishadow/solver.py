@@ -85,16 +85,16 @@ class TransferSolver:
     def build_pvs(self, poses, normals=None, *, tolerance=DEFAULT_PVS_TOLERANCE, progress=None):
         """Potentially visible sets (the paper's section 3.2), opt-in: it needs poses of the
         animation. poses: (F, N, 3) vertex positions of a few sampled frames (the bake range,
-        or poses you pick). For each receiver the solver keeps the clusters that contribute to
-        its mask in some sampled pose (nearest first, those that add cells the nearer ones
-        have not covered); later solves rasterize only those while the frame's pose stays
+        or poses you pick). For each receiver the solver keeps the clusters, and the distant
+        parts of the mesh it draws through proxies, that contribute to its mask in some
+        sampled pose (nearest first, those that add cells the nearer ones have not covered);
+        later solves rasterize only those while the frame's pose stays
         within `tolerance` of a sampled one: the largest vertex displacement, as a fraction of
         the rest pose's half size (its largest half-extent). Farther poses fall back to the
         full hierarchy (`stats['pvs']` says which was used). normals: (F, N, 3), the normals
         `solve` will be given for those poses (None: the mesh's own, as `solve` without
-        normals). Replaces earlier sets. The sets are per cluster, so a frame that uses them
-        draws every group of coarse triangles as the paper's two levels do (far_lod 0): its
-        result equals that of a solver with far_lod=0."""
+        normals). Replaces earlier sets. A sampled pose gives exactly the result it gives
+        without the sets."""
         poses = np.ascontiguousarray(poses, dtype=np.float32)
         if poses.ndim != 3 or poses.shape[1:] != (self.vertex_count, 3):
             raise ValueError(f"poses must have shape (F, {self.vertex_count}, 3), got {poses.shape}")
