@@ -5,12 +5,15 @@ of docs/solver_speed.md's tries):
     .venv/bin/python bench/solver_variant.py                         # the default, 8k Suzanne
     .venv/bin/python bench/solver_variant.py --set near_scale=1.0 --set far_lod=0.7
     .venv/bin/python bench/solver_variant.py --level 3 --rounds 1    # the 32k Suzanne
+    .venv/bin/python bench/solver_variant.py --level 3 --pvs         # and with build_pvs, side by side
 
 The frames (`scenes.suzanne`, 7 of them, frame 0 the rest pose), normals, offset, the 500
 receivers and their reference (128^2 rays, frames 2 and 5, on all cores) are bench/run.py's;
 they are cached in out/solver_variant/ (the reference takes a minute). Prints the median time
 per `solve` over `--rounds` passes of the moving frames (reuse off), the blockers per
-receiver, and the median and mean (AO >= 0.1) error of frames 2 and 5.
+receiver, and the median and mean (AO >= 0.1) error of frames 2 and 5. With `--pvs`, a second
+solver of the same setting after `build_pvs(every frame)` is timed in alternation with the
+first, solve by solve (on a shared machine only numbers taken side by side compare).
 """
 
 import argparse
@@ -61,30 +64,55 @@ def setting(text):
     return name, ast.literal_eval(value)
 
 
+def timed(solvers, frames, normals, rounds):
+    """Per solver, its solve times over `rounds` passes of the moving frames, in alternation."""
+    times = {label: [] for label in solvers}
+    for _ in range(rounds):
+        for f in range(1, len(frames)):
+            for label, solver in solvers.items():
+                start = time.perf_counter()
+                solver.solve(frames[f], normals[f])
+                times[label].append(time.perf_counter() - start)
+    return times
+
+
+def report(label, solver, times, data):
+    ids = data["ids"]
+    blockers = solver.stats["blockers_per_vertex"]
+    outputs = {f: solver.solve(data["frames"][f], data["normals"][f]) for f in EVALUATED}
+    summaries = [reference.error_summary(outputs[f][ids], data[f"T{f}"], data[f"ao{f}"]) for f in EVALUATED]
+    median, mean = (100 * np.mean([s[k] for s in summaries]) for k in ("median", "mean"))
+    print(f"{label}: {1000 * np.median(times):.1f} ms per solve (fastest {1000 * min(times):.1f}), "
+          f"{blockers:.0f} blockers per receiver, median error {median:.3f} %, mean {mean:.3f} %")
+    return outputs
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--set", type=setting, action="append", default=[], metavar="NAME=VALUE",
                         help="a TransferSolver keyword (repeatable)")
     parser.add_argument("--level", type=int, default=2, help="Subdivision Surface level (2: 8k vertices)")
     parser.add_argument("--rounds", type=int, default=3, help="passes over the moving frames timed")
+    parser.add_argument("--pvs", action="store_true", help="also the setting with build_pvs(every frame), side by side")
     args = parser.parse_args()
     data = prepared(args.level)
-    frames, normals, ids = data["frames"], data["normals"], data["ids"]
+    frames, normals = data["frames"], data["normals"]
     keywords = dict(args.set)
-    solver = hemishadow.TransferSolver(frames[0], data["tris"], offset=float(data["offset"]), reuse=False, **keywords)
-    solver.solve(frames[1], normals[1])  # warm-up
-    times = []
-    for _ in range(args.rounds):
-        for f in range(1, len(frames)):
-            start = time.perf_counter()
-            solver.solve(frames[f], normals[f])
-            times.append(time.perf_counter() - start)
-    blockers = solver.stats["blockers_per_vertex"]
-    summaries = [reference.error_summary(solver.solve(frames[f], normals[f])[ids], data[f"T{f}"], data[f"ao{f}"])
-                 for f in EVALUATED]
-    median, mean = (100 * np.mean([s[k] for s in summaries]) for k in ("median", "mean"))
-    print(f"{keywords or 'default'}: {1000 * np.median(times):.1f} ms per solve (fastest {1000 * min(times):.1f}), "
-          f"{blockers:.0f} blockers per receiver, median error {median:.3f} %, mean {mean:.3f} %")
+    label = str(keywords or "default")
+    make = lambda: hemishadow.TransferSolver(frames[0], data["tris"], offset=float(data["offset"]), reuse=False, **keywords)  # noqa: E731
+    solvers = {label: make()}
+    if args.pvs:
+        solvers["PVS"] = make()
+        start = time.perf_counter()
+        solvers["PVS"].build_pvs(frames, normals)
+        print(f"build_pvs of {len(frames)} poses: {time.perf_counter() - start:.1f} s")
+    for solver in solvers.values():
+        solver.solve(frames[1], normals[1])  # warm-up
+    times = timed(solvers, frames, normals, args.rounds)
+    outputs = {name: report(name, solver, times[name], data) for name, solver in solvers.items()}
+    if args.pvs:
+        same = all(np.array_equal(outputs["PVS"][f], outputs[label][f]) for f in EVALUATED)
+        print(f"PVS output on frames {EVALUATED}: {'identical to' if same else 'differs from'} the setting's")
 
 
 if __name__ == "__main__":
