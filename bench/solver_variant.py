@@ -6,8 +6,9 @@ of docs/solver_speed.md's tries):
     .venv/bin/python bench/solver_variant.py --set near_scale=1.0 --set far_lod=0.7
     .venv/bin/python bench/solver_variant.py --level 3 --rounds 1    # the 32k Suzanne
     .venv/bin/python bench/solver_variant.py --level 3 --pvs         # and with build_pvs, side by side
+    .venv/bin/python bench/solver_variant.py --mesh fox --pvs        # bench/run.py's other meshes
 
-The frames (`scenes.suzanne`, 7 of them, frame 0 the rest pose), normals, offset, the 500
+The frames (`run.make_mesh`, 7 of them, frame 0 the rest pose), normals, offset, the 500
 receivers and their reference (128^2 rays, frames 2 and 5, on all cores) are bench/run.py's;
 they are cached in out/solver_variant/ (the reference takes a minute). Prints the median time
 per `solve` over `--rounds` passes of the moving frames (reuse off), the blockers per
@@ -38,13 +39,22 @@ EVALUATED = run.FULL["eval_frames"]
 CACHE = HERE.parent / "out" / "solver_variant"
 
 
-def prepared(level):
-    """The mesh, its frames and the reference of the evaluated frames, cached per level."""
-    path = CACHE / f"suzanne_{level}.npz"
+def mesh_frames(mesh):
+    """(frames, triangles): `suzanne_<level>` for any level, else bench/run.py's mesh."""
+    level = mesh.removeprefix("suzanne_")
+    if level.isdigit():
+        return scenes.suzanne(int(level), n_frames=run.FULL["frames"])[:2]
+    return run.make_mesh(mesh, run.FULL, quick=False)[:2]
+
+
+def prepared(mesh):
+    """The mesh, its frames and the reference of the evaluated frames, cached per mesh."""
+    path = CACHE / f"{mesh}.npz"
     if not path.exists():
-        frames, tris = scenes.suzanne(level, n_frames=run.FULL["frames"])
+        frames, tris = mesh_frames(mesh)
         tris64, normals, offset = run.prepared(frames, tris)
-        ids = np.sort(np.random.default_rng(12345).choice(frames.shape[1], run.FULL["receivers"], replace=False))
+        count = min(frames.shape[1], run.FULL["receivers"])  # all vertices when fewer, as bench/run.py
+        ids = np.sort(np.random.default_rng(12345).choice(frames.shape[1], count, replace=False))
         with peers.EmbreePool() as pool:
             refs = {f: pool.reference(frames[f], tris64, normals[f], offset, run.FULL["reference_side"], 1000 * f, ids)
                     for f in EVALUATED}
@@ -82,7 +92,7 @@ def report(label, solver, times, data):
     outputs = {f: solver.solve(data["frames"][f], data["normals"][f]) for f in EVALUATED}
     summaries = [reference.error_summary(outputs[f][ids], data[f"T{f}"], data[f"ao{f}"]) for f in EVALUATED]
     median, mean = (100 * np.mean([s[k] for s in summaries]) for k in ("median", "mean"))
-    print(f"{label}: {1000 * np.median(times):.1f} ms per solve (fastest {1000 * min(times):.1f}), "
+    print(f"{label}: {1000 * np.median(times):.2f} ms per solve (fastest {1000 * min(times):.2f}), "
           f"{blockers:.0f} blockers per receiver, median error {median:.3f} %, mean {mean:.3f} %")
     return outputs
 
@@ -92,10 +102,11 @@ def main():
     parser.add_argument("--set", type=setting, action="append", default=[], metavar="NAME=VALUE",
                         help="a TransferSolver keyword (repeatable)")
     parser.add_argument("--level", type=int, default=2, help="Subdivision Surface level (2: 8k vertices)")
+    parser.add_argument("--mesh", choices=run.FULL["meshes"], help="one of bench/run.py's meshes instead of Suzanne")
     parser.add_argument("--rounds", type=int, default=3, help="passes over the moving frames timed")
     parser.add_argument("--pvs", action="store_true", help="also the setting with build_pvs(every frame), side by side")
     args = parser.parse_args()
-    data = prepared(args.level)
+    data = prepared(args.mesh or f"suzanne_{args.level}")
     frames, normals = data["frames"], data["normals"]
     keywords = dict(args.set)
     label = str(keywords or "default")
