@@ -53,7 +53,7 @@ impl Pvs {
     /// The unit id of the group tree's node `n`.
     #[inline(always)]
     pub fn node_unit(&self, n: usize) -> u32 {
-        self.clusters + n as u32
+        node_unit(self.clusters as usize, n)
     }
 
     /// Whether `vertex` keeps a unit with an id in `ids`.
@@ -105,6 +105,12 @@ fn max_displacement(a: &[Vec3], b: &[Vec3]) -> f32 {
         .zip(b)
         .map(|(p, q)| ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2)).sqrt())
         .fold(0.0, f32::max)
+}
+
+/// The unit id of node `n` of the group tree over a hierarchy of `clusters` clusters.
+#[inline(always)]
+pub fn node_unit(clusters: usize, n: usize) -> u32 {
+    (clusters + n) as u32
 }
 
 /// Cells by which a unit's mask is grown before the coverage test: a unit is dropped

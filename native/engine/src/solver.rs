@@ -18,7 +18,7 @@ use crate::hierarchy::{default_coarse_triangles, morton_permutation, Hierarchy, 
 use crate::integrate::{Brdf, Quadrature};
 use crate::mesh::{box_of, check_finite, weld, welded_normals, Normalization, Vec3};
 use crate::progress::{par_rows, par_rows_with, Progress};
-use crate::pvs::{contributing, Pvs};
+use crate::pvs::{contributing, node_unit, Pvs};
 use crate::plane_table::PlaneTable;
 use crate::packets::{PacketLists, LANES};
 use crate::rasterizer::Pipeline;
@@ -368,7 +368,7 @@ impl Solver {
         let mut kept = self.hierarchy.near_of(r).to_vec();
         let Some(receiver) = Receiver::new(frame.positions[r], frame.normals[r], self.offset) else { return kept };
         let (tree, table, origin) = (&self.group_tree, &*self.table, receiver.origin);
-        let (lod2, node_unit) = (self.far_lod2(), |n: usize| (self.hierarchy.clusters() + n) as u32);
+        let lod2 = self.far_lod2();
         let mut candidates = Vec::new();
         let mut stack: Vec<u32> = if tree.nodes.is_empty() { Vec::new() } else { vec![0] };
         while let Some(n) = stack.pop() {
@@ -386,7 +386,7 @@ impl Solver {
                 }
                 pipeline.drain(table, &mut mask);
                 if mask != Mask::EMPTY {
-                    candidates.push((centre_distance2(bounds, origin), node_unit(n), mask));
+                    candidates.push((centre_distance2(bounds, origin), node_unit(self.hierarchy.clusters(), n), mask));
                 }
             } else {
                 stack.extend_from_slice(&node.children);
@@ -415,9 +415,7 @@ impl Solver {
             }
             pipeline.drain(table, &mut mask);
             if mask != Mask::EMPTY {
-                let s = frame.spheres[c];
-                let d2 = [0, 1, 2].map(|a| s[a] - receiver.origin[a]).iter().map(|d| d * d).sum::<f32>();
-                candidates.push((d2, c as u32, mask));
+                candidates.push((centre_distance2(&frame.bounds[c], receiver.origin), c as u32, mask));
             }
         }
     }
