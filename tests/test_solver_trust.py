@@ -157,11 +157,14 @@ def test_pvs_keep_distant_proxies_and_draw_them_whole_up_close():
     expected = full.solve(far)
     np.testing.assert_array_equal(pvs.solve(far), expected)
     assert not np.array_equal(two_levels.solve(far), expected)  # the proxies were drawn
-    lowered = ao(pvs.solve(close)) - ao(full.solve(close))
+    shadowed = ao(full.solve(close))
+    lowered = ao(pvs.solve(close)) - shadowed
     assert pvs.stats["pvs"]
-    assert ao(full.solve(close))[: len(floor_v)].mean() < 0.7  # the lowered ceiling shadows the floor
+    assert shadowed[: len(floor_v)].mean() < 0.7  # the lowered ceiling shadows the floor
     assert lowered.min() >= -1e-6  # the sets only ever leave blockers out
-    assert np.median(lowered[: len(floor_v)]) < 0.01
+    # Measured: median 0.001, worst 0.13 (clusters sharing a group with the floor, too small to
+    # draw from afar); without drawing the ceiling whole, 0.38 and 0.55.
+    assert np.median(lowered[: len(floor_v)]) < 0.01 and lowered.max() < 0.2
 
 
 def test_pvs_with_given_normals_matches_solves_given_them():
