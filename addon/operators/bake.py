@@ -19,6 +19,7 @@ import numpy as np
 import bpy
 
 from .. import cache, casters, engine_bridge, lamps, mesh_io, staleness, world_render
+from .modal_job import ModalUi
 
 __all__ = ["BakeJob", "BakeResult", "bake_range", "HEMISHADOW_OT_bake_animation", "HEMISHADOW_OT_clear_bake", "classes"]
 
@@ -339,7 +340,7 @@ def bakeable_objects(context):
     return selected or enabled
 
 
-class HEMISHADOW_OT_bake_animation(bpy.types.Operator):
+class HEMISHADOW_OT_bake_animation(ModalUi, bpy.types.Operator):
     """Compute the scene's frame range into a cache per object; playback and animation renders then copy it"""
 
     bl_idname = "hemishadow.bake_animation"
@@ -357,8 +358,6 @@ class HEMISHADOW_OT_bake_animation(bpy.types.Operator):
         description="Also store the transfer vectors (float16), so lighting changes re-shade from the cache")
 
     _job = None
-    _timer = None
-    _area = None
 
     @classmethod
     def poll(cls, context):
@@ -376,8 +375,7 @@ class HEMISHADOW_OT_bake_animation(bpy.types.Operator):
 
     def _progress(self, done, count):
         bpy.context.window_manager.progress_update(done)
-        if self._area is not None:
-            self._area.header_text_set(f"Hemishadow: baking frame {done} of {count}  (Esc to cancel)")
+        self._status(bpy.context, f"Hemishadow: baking frame {done} of {count}  (Esc to cancel)")
 
     def execute(self, context):
         # Without a window (scripts, background mode): bake in one go.
@@ -433,16 +431,6 @@ class HEMISHADOW_OT_bake_animation(bpy.types.Operator):
         if self._job is not None:
             self._job.abort()
         self._end(context)
-
-    def _end(self, context):
-        wm = context.window_manager
-        if self._timer is not None:
-            wm.event_timer_remove(self._timer)
-            self._timer = None
-        wm.progress_end()
-        if self._area is not None:
-            self._area.header_text_set(None)
-            self._area = None
 
 
 class HEMISHADOW_OT_clear_bake(bpy.types.Operator):

@@ -7,10 +7,34 @@ has written (`finished`)."""
 from .. import worker_job
 
 
-class ModalJob:
-    _job = None
+class ModalUi:
+    """What a modal bake operator shows while it runs: a timer, the window manager's progress,
+    the status bar and the area's header; `_end` takes them all down."""
+
     _timer = None
     _area = None
+
+    def _status(self, context, text):
+        if context.workspace is not None:
+            context.workspace.status_text_set(text)
+        if self._area is not None:
+            self._area.header_text_set(text)
+
+    def _end(self, context):
+        wm = context.window_manager
+        if self._timer is not None:
+            wm.event_timer_remove(self._timer)
+            self._timer = None
+        wm.progress_end()
+        if context.workspace is not None:
+            context.workspace.status_text_set(None)
+        if self._area is not None:
+            self._area.header_text_set(None)
+            self._area = None
+
+
+class ModalJob(ModalUi):
+    _job = None
     noun = "bake"
 
     def start_modal(self, context, job):
@@ -53,21 +77,3 @@ class ModalJob:
         if self._job is not None:
             self._job.cancel()
         self._end(context)
-
-    def _status(self, context, text):
-        if context.workspace is not None:
-            context.workspace.status_text_set(text)
-        if self._area is not None:
-            self._area.header_text_set(text)
-
-    def _end(self, context):
-        wm = context.window_manager
-        if self._timer is not None:
-            wm.event_timer_remove(self._timer)
-            self._timer = None
-        wm.progress_end()
-        if context.workspace is not None:
-            context.workspace.status_text_set(None)
-        if self._area is not None:
-            self._area.header_text_set(None)
-            self._area = None
