@@ -373,23 +373,22 @@ impl Solver {
         let mut stack: Vec<u32> = if tree.nodes.is_empty() { Vec::new() } else { vec![0] };
         while let Some(n) = stack.pop() {
             let (n, bounds) = (n as usize, &frame.node_bounds[n as usize]);
-            let node = tree.nodes[n];
-            if self.blockers.cull && receiver.below_horizon(bounds) {
+            if self.culled(&receiver, bounds) {
                 continue;
             }
-            if node.children == LEAF {
-                self.cluster_candidates(node.first as usize, r, &receiver, frame, &mut candidates);
-            } else if is_far(bounds, origin, lod2) {
-                let (mut mask, mut pipeline) = (Mask::EMPTY, Pipeline::default());
-                for packet in tree.proxies.of(n) {
-                    pipeline.rasterize_packet(table, origin, &receiver.frame, packet, u32::MAX, r as u32, &mut mask);
+            match self.turn(n, bounds, origin, lod2) {
+                Turn::Group(g) => self.cluster_candidates(g, r, &receiver, frame, &mut candidates),
+                Turn::Proxy => {
+                    let (mut mask, mut pipeline) = (Mask::EMPTY, Pipeline::default());
+                    for packet in tree.proxies.of(n) {
+                        pipeline.rasterize_packet(table, origin, &receiver.frame, packet, u32::MAX, r as u32, &mut mask);
+                    }
+                    pipeline.drain(table, &mut mask);
+                    if mask != Mask::EMPTY {
+                        candidates.push((centre_distance2(bounds, origin), node_unit(self.hierarchy.clusters(), n), mask));
+                    }
                 }
-                pipeline.drain(table, &mut mask);
-                if mask != Mask::EMPTY {
-                    candidates.push((centre_distance2(bounds, origin), node_unit(self.hierarchy.clusters(), n), mask));
-                }
-            } else {
-                stack.extend_from_slice(&node.children);
+                Turn::Open(children) => stack.extend_from_slice(&children),
             }
         }
         kept.extend(contributing(candidates));
@@ -506,26 +505,20 @@ impl Solver {
     /// in the last (every node it culls, draws through its proxy or opens) and meets nothing
     /// that moved except below its horizon in both frames: then its blockers are the same.
     fn same_walk(&self, receiver: &Receiver, frame: &Frame, last: &LastFrame, group_moved: &[bool], node_moved: &[bool]) -> bool {
-        let tree = &self.group_tree;
-        let lod2 = self.far_lod2();
-        let far = |b: &[Vec3; 2]| is_far(b, receiver.origin, lod2);
+        let (lod2, origin) = (self.far_lod2(), receiver.origin);
         let mut stack = vec![0u32];
         while let Some(n) = stack.pop() {
             let n = n as usize;
             let (now, then) = (&frame.node_bounds[n], &last.node_bounds[n]);
-            let node = tree.nodes[n];
-            if (receiver.below_horizon(now), receiver.below_horizon(then)) == (true, true) {
+            // Below the horizon in both frames: nothing in it is drawn, culled or not.
+            if receiver.below_horizon(now) && receiver.below_horizon(then) {
                 continue;
             }
-            if node.children == LEAF {
-                if group_moved[node.first as usize] {
-                    return false;
-                }
-                continue;
-            }
-            match (far(now), far(then)) {
-                (true, true) if !node_moved[n] => {}
-                (false, false) => stack.extend_from_slice(&node.children),
+            match (self.turn(n, now, origin, lod2), self.turn(n, then, origin, lod2)) {
+                (Turn::Group(g), _) if group_moved[g] => return false,
+                (Turn::Group(_), _) => {}
+                (Turn::Proxy, Turn::Proxy) if !node_moved[n] => {}
+                (Turn::Open(children), Turn::Open(_)) => stack.extend_from_slice(&children),
                 _ => return false,
             }
         }
@@ -613,29 +606,31 @@ impl Solver {
         }
         while let Some(entry) = stack.pop() {
             let (n, whole) = ((entry & !WHOLE) as usize, entry & WHOLE);
-            let node = tree.nodes[n];
-            if self.blockers.cull && receiver.below_horizon(&frame.node_bounds[n]) {
+            let bounds = &frame.node_bounds[n];
+            if self.culled(receiver, bounds) {
                 continue;
             }
             let sets = pvs.filter(|_| whole == 0);
             if sets.is_some_and(|pvs| !self.keeps_below(pvs, r, n)) {
                 continue;
             }
-            if node.children == LEAF {
-                rasterized += self.group_blockers(node.first as usize, r, sets, frame, receiver, &mut pipeline, &mut mask);
-                if mask == self.disk {
-                    break;
+            match self.turn(n, bounds, origin, lod2) {
+                Turn::Group(g) => {
+                    rasterized += self.group_blockers(g, r, sets, frame, receiver, &mut pipeline, &mut mask);
+                    if mask == self.disk {
+                        break;
+                    }
                 }
-                continue;
-            }
-            if is_far(&frame.node_bounds[n], origin, lod2) {
-                for packet in tree.proxies.of(n) {
-                    rasterized += pipeline.rasterize_packet(table, origin, &receiver.frame, packet, u32::MAX, r as u32, &mut mask);
+                Turn::Proxy => {
+                    for packet in tree.proxies.of(n) {
+                        rasterized += pipeline.rasterize_packet(table, origin, &receiver.frame, packet, u32::MAX, r as u32, &mut mask);
+                    }
                 }
-            } else {
-                let proxy_kept = sets.is_some_and(|pvs| pvs.keeps_any(r, pvs.node_unit(n)..pvs.node_unit(n + 1)));
-                let whole = if proxy_kept { WHOLE } else { whole };
-                stack.extend_from_slice(&[node.children[1] | whole, node.children[0] | whole]); // in group order
+                Turn::Open([first, second]) => {
+                    let proxy_kept = sets.is_some_and(|pvs| pvs.keeps_any(r, pvs.node_unit(n)..pvs.node_unit(n + 1)));
+                    let whole = if proxy_kept { WHOLE } else { whole };
+                    stack.extend_from_slice(&[second | whole, first | whole]); // in group order
+                }
             }
         }
         pipeline.drain(table, &mut mask);
@@ -650,6 +645,27 @@ impl Solver {
         let clusters = node.clusters(self.hierarchy.clusters());
         pvs.keeps_any(r, pvs.node_unit(n)..pvs.node_unit(node.subtree_end as usize))
             || pvs.keeps_any(r, clusters.start as u32..clusters.end as u32)
+    }
+
+    /// How the walks down the group tree (`own_mask`, the sets' `contributing_units`, reuse's
+    /// `same_walk`) meet node `n` with box `bounds` seen from `origin`: one rule for all three,
+    /// since the sets and reuse are exact only while their walks take the solve's turns.
+    #[inline(always)]
+    fn turn(&self, n: usize, bounds: &[Vec3; 2], origin: Vec3, lod2: f32) -> Turn {
+        let node = self.group_tree.nodes[n];
+        if node.children == LEAF {
+            Turn::Group(node.first as usize)
+        } else if is_far(bounds, origin, lod2) {
+            Turn::Proxy
+        } else {
+            Turn::Open(node.children)
+        }
+    }
+
+    /// Whether the walks skip a box: culling is on and the box is below the receiver's horizon.
+    #[inline(always)]
+    fn culled(&self, receiver: &Receiver, bounds: &[Vec3; 2]) -> bool {
+        self.blockers.cull && receiver.below_horizon(bounds)
     }
 
     /// The square of the group tree's `far_lod`; 0 (every group opened) without the
@@ -669,7 +685,7 @@ impl Solver {
         let first = g * GROUP;
         let clusters = (first + GROUP).min(h.clusters()) - first;
         let seen = sets.map_or(u32::MAX, |pvs| bits_of(pvs.of(r), first, clusters));
-        if seen == 0 || (self.blockers.cull && receiver.below_horizon(&frame.group_bounds[g])) {
+        if seen == 0 || self.culled(receiver, &frame.group_bounds[g]) {
             return 0;
         }
         let mut rasterized = 0;
@@ -684,7 +700,7 @@ impl Solver {
         while bits != 0 {
             let c = first + bits.trailing_zeros() as usize;
             bits &= bits - 1;
-            if self.blockers.cull && receiver.below_horizon(&frame.bounds[c]) {
+            if self.culled(receiver, &frame.bounds[c]) {
                 continue;
             }
             for packet in self.fine_packets.of(c) {
@@ -713,6 +729,14 @@ fn snapped(positions: &[Vec3], triangles: &[[u32; 3]]) -> Vec<Vec3> {
     triangles.iter().flatten().for_each(|&v| used[v as usize] = true);
     let snap = |p: &Vec3| p.map(|c| (c * 1024.0).round() / 1024.0);
     positions.iter().zip(used).map(|(p, used)| if used { snap(p) } else { [0.0; 3] }).collect()
+}
+
+/// A walk's turn at a node of the group tree (`Solver::turn`): a leaf's group, a node drawn
+/// through its proxy, or a node opened into its two children.
+enum Turn {
+    Group(usize),
+    Proxy,
+    Open([u32; 2]),
 }
 
 /// Marks a node of the walk's stack kept whole by the potentially visible sets: its proxy was
