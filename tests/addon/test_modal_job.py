@@ -129,3 +129,42 @@ def test_a_failing_worker_reports_its_error_and_writes_nothing():
     assert op.modal(context, Event("TIMER")) == {"CANCELLED"}
     assert job.written is None and op.done is None
     assert any(kind == "ERROR" and "the engine said no" in message for kind, message in op.reports)
+
+
+class Area:
+    def __init__(self):
+        self.header = "something"
+
+    def header_text_set(self, text):
+        self.header = text
+
+
+class BakeStep:
+    """Stands in for bake.BakeJob: one step still running, then done with two frames."""
+
+    def __init__(self):
+        self.cancel, self.steps = threading.Event(), 0
+        self.result = type("Result", (), {"cancelled": False, "frames_done": 2, "saved": {"Cube": "//c.npz"}})()
+
+    def step(self, budget_seconds):
+        self.steps += 1
+        return self.steps > 1
+
+
+def test_the_animation_bake_takes_its_ui_down_through_the_shared_teardown():
+    from addon.operators.bake import HEMISHADOW_OT_bake_animation as Bake
+    from addon.operators.modal_job import ModalUi
+
+    class StandIn(ModalUi):  # the operator's methods, called on a stand-in: bpy makes operators itself
+        def report(self, kind, message):
+            self.reported = (next(iter(kind)), message)
+
+    op, context = StandIn(), Context()
+    op._job, op._area, op._timer = BakeStep(), Area(), context.window_manager.event_timer_add(0.01)
+    assert Bake.modal(op, context, Event("TIMER")) == {"RUNNING_MODAL"}
+    assert op._area.header == "something" and context.window_manager.timers == 1
+    area = op._area
+    assert Bake.modal(op, context, Event("TIMER")) == {"FINISHED"}
+    assert area.header is None and op._area is None and op._timer is None
+    assert context.window_manager.timers == 0 and context.window_manager.progress[-1] == "end"
+    assert op.reported == ("INFO", "hemishadow: baked 2 frames: //c.npz")
