@@ -20,7 +20,7 @@ use crate::mesh::{box_of, check_finite, weld, welded_normals, Normalization, Vec
 use crate::progress::{par_rows, par_rows_with, Progress};
 use crate::pvs::{contributing, node_unit, Pvs};
 use crate::plane_table::PlaneTable;
-use crate::packets::{PacketLists, LANES};
+use crate::packets::{Packet, PacketLists, LANES};
 use crate::rasterizer::Pipeline;
 use crate::caster_reuse::{CasterCache, CasterPlan, Kept};
 use crate::scene::casters::Casters;
@@ -367,7 +367,7 @@ impl Solver {
     fn contributing_units(&self, r: usize, frame: &Frame) -> Vec<u32> {
         let mut kept = self.hierarchy.near_of(r).to_vec();
         let Some(receiver) = Receiver::new(frame.positions[r], frame.normals[r], self.offset) else { return kept };
-        let (tree, table, origin) = (&self.group_tree, &*self.table, receiver.origin);
+        let (tree, origin) = (&self.group_tree, receiver.origin);
         let lod2 = self.far_lod2();
         let mut candidates = Vec::new();
         let mut stack: Vec<u32> = if tree.nodes.is_empty() { Vec::new() } else { vec![0] };
@@ -379,11 +379,7 @@ impl Solver {
             match self.turn(n, bounds, origin, lod2) {
                 Turn::Group(g) => self.cluster_candidates(g, r, &receiver, frame, &mut candidates),
                 Turn::Proxy => {
-                    let (mut mask, mut pipeline) = (Mask::EMPTY, Pipeline::default());
-                    for packet in tree.proxies.of(n) {
-                        pipeline.rasterize_packet(table, origin, &receiver.frame, packet, u32::MAX, r as u32, &mut mask);
-                    }
-                    pipeline.drain(table, &mut mask);
+                    let mask = self.unit_mask(r, &receiver, tree.proxies.of(n), u32::MAX);
                     if mask != Mask::EMPTY {
                         candidates.push((centre_distance2(bounds, origin), node_unit(self.hierarchy.clusters(), n), mask));
                     }
@@ -397,26 +393,31 @@ impl Solver {
 
     /// Each cluster of group `g` that draws anything for receiver `r`, as a candidate unit.
     fn cluster_candidates(&self, g: usize, r: usize, receiver: &Receiver, frame: &Frame, candidates: &mut Vec<(f32, u32, Mask)>) {
-        let (h, table) = (&self.hierarchy, &*self.table);
         let first = g * GROUP;
-        let clusters = (first + GROUP).min(h.clusters()) - first;
+        let clusters = (first + GROUP).min(self.hierarchy.clusters()) - first;
         let expanded = self.expanded_clusters(r, receiver, frame, first, clusters);
         for i in 0..clusters {
             let c = first + i;
-            let (mut mask, mut pipeline) = (Mask::EMPTY, Pipeline::default());
-            if expanded >> i & 1 == 1 {
-                for packet in self.fine_packets.of(c) {
-                    pipeline.rasterize_packet(table, receiver.origin, &receiver.frame, packet, u32::MAX, r as u32, &mut mask);
-                }
+            let mask = if expanded >> i & 1 == 1 {
+                self.unit_mask(r, receiver, self.fine_packets.of(c), u32::MAX)
             } else {
-                let packet = &self.coarse_packets.of(g)[i / LANES];
-                pipeline.rasterize_packet(table, receiver.origin, &receiver.frame, packet, 1 << (i % LANES), r as u32, &mut mask);
-            }
-            pipeline.drain(table, &mut mask);
+                self.unit_mask(r, receiver, [&self.coarse_packets.of(g)[i / LANES]], 1 << (i % LANES))
+            };
             if mask != Mask::EMPTY {
                 candidates.push((centre_distance2(&frame.bounds[c], receiver.origin), c as u32, mask));
             }
         }
+    }
+
+    /// The mask the `lanes` of `packets` draw alone for receiver `r`: the sets judge each unit
+    /// apart.
+    fn unit_mask<'a>(&self, r: usize, receiver: &Receiver, packets: impl IntoIterator<Item = &'a Packet>, lanes: u32) -> Mask {
+        let (table, mut mask, mut pipeline) = (&*self.table, Mask::EMPTY, Pipeline::default());
+        for packet in packets {
+            pipeline.rasterize_packet(table, receiver.origin, &receiver.frame, packet, lanes, r as u32, &mut mask);
+        }
+        pipeline.drain(table, &mut mask);
+        mask
     }
 
     /// Bits of the clusters `first..first + clusters` that receiver `r` sees at full
