@@ -47,8 +47,13 @@ def mesh_frames(mesh):
     return run.make_mesh(mesh, run.FULL, quick=False)[:2]
 
 
+# bench/run.py's names of the Suzanne levels: one cache file per level, whichever name asks.
+SUZANNE_LEVELS = {"suzanne_2k": "suzanne_1", "suzanne_8k": "suzanne_2", "suzanne_32k": "suzanne_3"}
+
+
 def prepared(mesh):
     """The mesh, its frames and the reference of the evaluated frames, cached per mesh."""
+    mesh = SUZANNE_LEVELS.get(mesh, mesh)
     path = CACHE / f"{mesh}.npz"
     if not path.exists():
         frames, tris = mesh_frames(mesh)
