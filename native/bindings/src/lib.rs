@@ -273,7 +273,10 @@ impl PySolver {
         if let Some(c) = casters.as_ref().filter(|c| !c.borrow().inner.prepared()) {
             let mut c = c.try_borrow_mut()?;
             let scene = &mut c.inner;
-            run(py, || Ok(scene.prepare()))?;
+            run(py, || {
+                scene.prepare();
+                Ok(())
+            })?;
         }
         // Shared from here on: other objects' solves may read the same scene meanwhile.
         let casters = casters.as_ref().map(|c| c.try_borrow()).transpose()?;

@@ -70,6 +70,7 @@ impl PyRelighter {
     /// maps: (k, H, W, 3) uint8 (with scale, offset (k, 3)) or uint16 half bits (scale and
     /// offset None); position (H, W, 3); hit (H, W) bool; rotation (3, 3) rows.
     #[new]
+    #[allow(clippy::too_many_arguments)] // the Python constructor's arguments
     #[pyo3(signature = (maps_u8, maps_f16, scale, offset, position, hit, rotation_rows))]
     fn new(py: Python<'_>, maps_u8: Option<PyReadonlyArray4<u8>>, maps_f16: Option<PyReadonlyArray4<u16>>,
            scale: Option<PyReadonlyArray2<f32>>, offset: Option<PyReadonlyArray2<f32>>, position: PyReadonlyArray3<f32>,

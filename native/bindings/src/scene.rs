@@ -10,6 +10,9 @@ use pyo3::prelude::*;
 
 use crate::{rows3, run, triangles3, vec3, PyProgress};
 
+/// `Scene.visibility_valid`'s result: masks (P, 16) uint64 and validity (P,).
+type MasksAndValid<'py> = (Bound<'py, PyArray2<u64>>, Bound<'py, PyArray1<bool>>);
+
 #[pyclass(name = "Scene", module = "hemishadow._native")]
 pub struct PyScene {
     /// Boxed for the same reason as the solver: Python objects are only 16-byte aligned.
@@ -211,7 +214,7 @@ impl PyScene {
         points: PyReadonlyArray2<f32>,
         normals: PyReadonlyArray2<f32>,
         offset: Option<f32>,
-    ) -> PyResult<(Bound<'py, PyArray2<u64>>, Bound<'py, PyArray1<bool>>)> {
+    ) -> PyResult<MasksAndValid<'py>> {
         let (p, n) = (rows3(&points, "points")?, rows3(&normals, "normals")?);
         let inner = &mut self.inner;
         let (masks, valid) = run(py, || inner.visibility_valid(&p, &n, offset))?;

@@ -35,7 +35,7 @@ pub struct Frame {
 
 impl Frame {
     #[inline(always)]
-    fn to_world(&self, l: [f32; 3]) -> [f32; 3] {
+    fn to_world(self, l: [f32; 3]) -> [f32; 3] {
         let (t, b, n) = (self.t, self.b, self.n);
         [
             l[0] * t[0] + l[1] * b[0] + l[2] * n[0],

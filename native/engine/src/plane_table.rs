@@ -330,6 +330,9 @@ impl PlaneTable {
     /// `codes` for eight normals in AVX2 registers: the same operations in the same order,
     /// so the same codes bit for bit (`max`/`min` with the bound second are the portable
     /// clamps, NaN included).
+    ///
+    /// # Safety
+    /// The CPU must support AVX2 (`is_x86_feature_detected!("avx2")`).
     #[cfg(target_arch = "x86_64")]
     #[inline]
     #[target_feature(enable = "avx2")]

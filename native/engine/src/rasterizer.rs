@@ -176,6 +176,7 @@ impl Pipeline {
     /// frame `frame`, except triangles with a corner `exclude` (the receiver's own vertex) and
     /// triangles wholly below the horizon. Returns how many were rasterized. Call `drain`
     /// before reading `mask`.
+    #[allow(clippy::too_many_arguments)]
     #[inline(always)]
     pub fn rasterize_packet(
         &mut self,

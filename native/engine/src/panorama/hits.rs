@@ -9,6 +9,9 @@ use super::directions::{self, Rotation};
 use crate::error::{Error, Result};
 use crate::scene::Scene;
 
+/// A pixel's closest hit and the direction of its ray.
+type RayHit = (super::bvh::Hit, [f64; 3]);
+
 /// Per pixel, row 0 at the top; background pixels have `instance` = -1, t = inf, zeros elsewhere.
 pub struct Hits {
     pub width: usize,
@@ -47,7 +50,7 @@ pub fn primary_hits(scene: &Scene, origin: [f64; 3], rotation: &Rotation, width:
         mesh: vec![-1; n],
         back: vec![false; n],
     };
-    let per_row: Vec<Vec<Option<(super::bvh::Hit, [f64; 3])>>> = rows
+    let per_row: Vec<Vec<Option<RayHit>>> = rows
         .par_iter()
         .map_init(Vec::new, |stack, row| {
             cols.iter()

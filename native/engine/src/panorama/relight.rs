@@ -39,8 +39,11 @@ pub struct Relighter {
     rotation: Rotation,
     /// The background of the last environment (its SH and H*W*3 values): dragging a sun under
     /// a fixed environment does not evaluate it again.
-    background_cache: Mutex<Option<(Vec<[f32; 3]>, Arc<Vec<f32>>)>>,
+    background_cache: Mutex<Option<Background>>,
 }
+
+/// An environment's SH (k) and the H*W*3 values its background shows.
+type Background = (Vec<[f32; 3]>, Arc<Vec<f32>>);
 
 #[derive(Clone, Copy, Debug)]
 pub struct PointLight {
@@ -65,12 +68,15 @@ pub(crate) struct Folded {
     pub uniform: Vec<[f32; 3]>,
     pub base: [f32; 3],
     /// Per point light: (light, per-map raw-value scale x intensity, per-map offset x intensity).
-    pub points: Vec<(PointLight, Vec<[f32; 3]>, Vec<[f32; 3]>)>,
+    pub points: Vec<FoldedPoint>,
     /// The same weights repeated over a block's 24 interleaved values (the portable code).
     pub uniform_block: Vec<[f32; 3 * LANES]>,
     pub base_block: [f32; 3 * LANES],
     pub points_block: Vec<Vec<[f32; 3 * LANES]>>,
 }
+
+/// A point light with its per-map raw-value scale and offset, both times its intensity.
+pub(crate) type FoldedPoint = (PointLight, Vec<[f32; 3]>, Vec<[f32; 3]>);
 
 fn spread(w: &[f32; 3]) -> [f32; 3 * LANES] {
     std::array::from_fn(|e| w[e % 3])
@@ -190,7 +196,7 @@ impl Relighter {
                 base[c] += lighting.uniform[i][c] * offset[i][c];
             }
         }
-        let points: Vec<(PointLight, Vec<[f32; 3]>, Vec<[f32; 3]>)> = lighting
+        let points: Vec<FoldedPoint> = lighting
             .points
             .iter()
             .map(|p| {
@@ -249,7 +255,7 @@ impl Relighter {
         for i in 0..k {
             let (w, x) = (&folded.uniform_block[i], &raw[i]);
             for e in 0..3 * LANES {
-                acc[e] = acc[e] + w[e] * x[e];
+                acc[e] += w[e] * x[e];
             }
         }
         let mut t = [[0.0f32; LANES]; 25];
@@ -261,11 +267,11 @@ impl Relighter {
                 let spread_t: [f32; 3 * LANES] = std::array::from_fn(|e| t[i][e / 3]);
                 let (w, x) = (&ws[i], &raw[i]);
                 for e in 0..3 * LANES {
-                    sum[e] = sum[e] + (spread_t[e] * w[e]) * x[e];
+                    sum[e] += (spread_t[e] * w[e]) * x[e];
                 }
             }
             for e in 0..3 * LANES {
-                acc[e] = acc[e] + (sum[e] + offsets[e]);
+                acc[e] += sum[e] + offsets[e];
             }
         }
         out.copy_from_slice(&acc[..n]);
@@ -273,6 +279,7 @@ impl Relighter {
 
     /// For a point light and up to 8 pixels: t[i][j] = f(d_j) Y_i(l_j) and the offsets' part,
     /// offsets[3 j + c] = sum_i t[i][j] wo[i][c]. Lanes past `lanes` repeat the last pixel.
+    #[allow(clippy::too_many_arguments)]
     #[inline(always)]
     pub(crate) fn point_lanes(&self, r: usize, p: usize, lanes: usize, light: &PointLight, wo: &[[f32; 3]],
                               t: &mut [Lanes; 25], offsets: &mut [f32; 3 * LANES]) {
@@ -306,7 +313,7 @@ impl Relighter {
         sh_lanes::eval(&x, &y, &z, k, t);
         for ti in t.iter_mut().take(k) {
             for j in 0..LANES {
-                ti[j] = ti[j] * f[j];
+                ti[j] *= f[j];
             }
         }
         // The offsets' part per channel in lane order, then interleaved like the values.
@@ -315,7 +322,7 @@ impl Relighter {
             for i in 0..k {
                 let w = wo[i][c];
                 for j in 0..LANES {
-                    pc[j] = pc[j] + t[i][j] * w;
+                    pc[j] += t[i][j] * w;
                 }
             }
         }
