@@ -16,30 +16,11 @@ import numpy as np
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
 import hemishadow  # noqa: E402
-from meshes import MESHES, load_asset  # noqa: E402
-
-BANDS = 3  # AO is T_0; the band count does not change which blockers are used
-STATIC = dict(MESHES, armadillo=lambda: load_asset("armadillo.obj"))
-SUBSET = 1500  # receivers of the large scans, as in the trust test
-
-
-def ao(transfer):
-    return hemishadow.ambient_occlusion(transfer)
-
-
-def engine_mesh(name):
-    v, t = STATIC[name]()
-    return np.asarray(v, np.float32), np.asarray(t, np.uint32)
-
-
-def receivers(count):
-    if count <= 5000:
-        return np.arange(count)
-    return np.sort(np.random.default_rng(7).choice(count, SUBSET, replace=False))
+from test_solver_trust import BANDS, STATIC, TURNS, ao, as_engine, receivers, turned  # noqa: E402
 
 
 def against_exact(name, scales):
-    v, t = engine_mesh(name)
+    v, t = as_engine(STATIC[name])
     ids = receivers(len(v))
     exact = ao(hemishadow.transfer(v, t, bands=BANDS, receivers=ids))
     cells = []
@@ -51,20 +32,16 @@ def against_exact(name, scales):
     print(f"{name} ({len(v)}): " + " | ".join(cells), flush=True)
 
 
-def turned(v, t, matrix, scale):
-    moved = (v.astype(np.float64) @ matrix.T).astype(np.float32)
-    tris = t[:, ::-1].copy() if np.linalg.det(matrix) < 0 else t  # a mirror turns faces inside out
+def turned_ao(v, t, matrix, scale):
+    moved, tris = turned(v, t, matrix)
     return ao(hemishadow.TransferSolver(moved, tris, bands=BANDS, near_scale=scale).solve(moved))
 
 
 def invariance(name, scales):
-    v, t = engine_mesh(name)
-    turns = {"rotate_x": hemishadow.rotation_matrix((1, 0, 0), 1.1), "rotate_xyz": hemishadow.rotation_matrix((1, 2, 3), 2.3),
-             "mirror_x": np.diag([-1.0, 1, 1]), "mirror_xy": np.diag([-1.0, -1, 1]),
-             "mirror_rotate": hemishadow.rotation_matrix((0, 1, 1), 0.7) @ np.diag([1.0, 1, -1])}
+    v, t = as_engine(STATIC[name])
     for scale in scales:
         base = ao(hemishadow.TransferSolver(v, t, bands=BANDS, near_scale=scale).solve(v))
-        cells = [f"{case} {np.abs(turned(v, t, np.asarray(m, np.float64), scale) - base).max():.3f}" for case, m in turns.items()]
+        cells = [f"{case} {np.abs(turned_ao(v, t, m, scale) - base).max():.3f}" for case, m in TURNS.items()]
         if name == "spot":
             far = v + np.float32(50.0)
             d = np.abs(ao(hemishadow.TransferSolver(far, t, bands=BANDS, near_scale=scale).solve(far)) - base)

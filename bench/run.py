@@ -68,12 +68,16 @@ QUICK = dict(
 )
 
 
+# Subdivision levels of the Suzanne meshes, by the names of the report.
+SUZANNE_LEVELS = {"2k": 1, "8k": 2, "32k": 3}
+
+
 def make_mesh(name, cfg, quick):
     if name == "cloth":
         picks = (1, 12, 16, 20) if quick else (1, 24, 28, 32, 36, 40, 44, 48)
         return scenes.cloth(frames=picks, quick=quick)
     if name.startswith("suzanne_"):
-        return scenes.suzanne({"2k": 1, "8k": 2, "32k": 3}[name.split("_")[1]], n_frames=cfg["frames"])
+        return scenes.suzanne(SUZANNE_LEVELS[name.split("_")[1]], n_frames=cfg["frames"])
     return scenes.character(name + ".glb", n_frames=cfg["frames"])
 
 

@@ -47,13 +47,16 @@ def mesh_frames(mesh):
     return run.make_mesh(mesh, run.FULL, quick=False)[:2]
 
 
-# bench/run.py's names of the Suzanne levels: one cache file per level, whichever name asks.
-SUZANNE_LEVELS = {"suzanne_2k": "suzanne_1", "suzanne_8k": "suzanne_2", "suzanne_32k": "suzanne_3"}
+def cache_name(mesh):
+    """bench/run.py's Suzanne names (suzanne_8k) as their level (suzanne_2): one cache file per
+    level, whichever name asks."""
+    size = mesh.removeprefix("suzanne_")
+    return f"suzanne_{run.SUZANNE_LEVELS[size]}" if size in run.SUZANNE_LEVELS else mesh
 
 
 def prepared(mesh):
     """The mesh, its frames and the reference of the evaluated frames, cached per mesh."""
-    mesh = SUZANNE_LEVELS.get(mesh, mesh)
+    mesh = cache_name(mesh)
     path = CACHE / f"{mesh}.npz"
     if not path.exists():
         frames, tris = mesh_frames(mesh)
