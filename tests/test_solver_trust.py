@@ -197,13 +197,21 @@ def test_size_does_not_change_results(name, scale):
     assert d.max() <= 0.01 and (d > 0.005).mean() <= 0.001, (d.max(), (d > 0.005).sum())
 
 
+def moved_away(v):
+    """The mesh 50 of its sizes away, as the place test moves it (bench/near_scale_sweep.py
+    moves it the same way)."""
+    return v + np.float32(50.0)
+
+
 def test_place_does_not_change_results():
     v, t = as_engine(MESHES["spot"])
     base = ao(hemishadow.TransferSolver(v, t, bands=BANDS).solve(v))
-    far = v + np.float32(50.0)  # 50 mesh sizes away
+    far = moved_away(v)
     d = np.abs(ao(hemishadow.TransferSolver(far, t, bands=BANDS).solve(far)) - base)
     # float32 holds positions 50 sizes away to 4e-6 of the size: the geometry itself moves by
-    # that much, which flips a few texels more than scaling does (10 of 3225 vertices > 0.005).
+    # that much, enough for the simplifier to build another coarse mesh, which the near
+    # clusters' fine triangles mostly hide (14 of 3225 vertices > 0.005; the exact path: none;
+    # docs/solver_speed.md).
     assert d.max() <= 0.01 and (d > 0.005).mean() <= 0.005, (d.max(), (d > 0.005).sum())
 
 

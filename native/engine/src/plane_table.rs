@@ -10,11 +10,12 @@
 //! fetch. The lookup rounds a normal and its opposite apart only when a coordinate lands
 //! within an ulp of a texel boundary (u s + R/2 and R/2 - u s round on grids of different
 //! steps): 287 of 20 million random normals at 128, each leaving a sliver of cells open or
-//! covered twice along that edge. Around a shared vertex the rounded planes of different edges need not meet in one
-//! point, which can leave a sliver open: finely tessellated blockers seen at grazing angles
-//! leak a little light (see docs/algorithm.md). Widening every mask by the quantisation angle
-//! closes those slivers but was measured to over-occlude real meshes far more (spot: median
-//! error 2 % -> 8 %). Tables are built once per resolution and shared by all threads.
+//! covered twice along that edge. Around a shared vertex the rounded planes of different
+//! edges need not meet in one point, which can leave a sliver open: finely tessellated
+//! blockers seen at grazing angles leak a little light (see docs/algorithm.md). Widening every
+//! mask by the quantisation angle closes those slivers but was measured to over-occlude real
+//! meshes far more (spot: median error 2 % -> 8 %). Tables are built once per resolution and
+//! shared by all threads.
 
 #[cfg(target_arch = "x86_64")]
 use std::arch::x86_64::*;
