@@ -86,6 +86,17 @@ def test_degenerate_and_non_manifold_meshes_give_finite_results():
     assert np.isfinite(t).all() and not t[4:].any() and t[:4].any()
 
 
+def test_solver_on_degenerate_meshes():
+    # Zero-area triangles with distinct corners: zeros, as the exact path gives (without its
+    # warning, which every frame would repeat; docs/usage.md).
+    line = np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0]], np.float32)
+    t = hemishadow.TransferSolver(line, [[0, 1, 2]], bands=3).solve(line)
+    assert t.shape == (3, 9) and np.isfinite(t).all() and not t.any()
+    # Corners at one position weld into one vertex: no triangle is left to build blockers from.
+    point = np.zeros((3, 3), np.float32)
+    raises("two corners at the same position", hemishadow.TransferSolver, point, [[0, 1, 2]], bands=3)
+
+
 def test_bad_environment_images(tmp_path):
     raises("shape", hemishadow.project_environment, np.ones((4, 8)))
     raises("3 or 4 channels", hemishadow.project_environment, np.ones((4, 8, 2)))

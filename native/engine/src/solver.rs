@@ -135,7 +135,7 @@ impl Solver {
         }
         let (mesh, normalization) = weld(rest, triangles)?.normalized();
         if mesh.triangles.is_empty() {
-            return Err(Error::invalid("every triangle of the mesh is degenerate (repeats a vertex)"));
+            return Err(Error::invalid("every triangle of the mesh is degenerate: each has two corners at the same position (or the same vertex twice)"));
         }
         let offset = checked_offset(settings.offset, &mesh, normalization.scale())?;
         let coarse_target = blockers.coarse_triangles.unwrap_or(default_coarse_triangles(mesh.triangles.len()));
