@@ -29,7 +29,8 @@ class TransferSolver:
     within near_scale x their radius of a receiver are seen at full resolution as well,
     whatever the surface distance (a coarse triangle that close cuts through the real
     surface and would shadow falsely); 0 uses the ring only. The default, 2.5, keeps every
-    vertex of the shared meshes and characters within 0.1 AO of the exact path.
+    vertex of the shared meshes and characters as given within 0.1 AO of the exact path
+    (turned copies of the teapot and the armadillo reach 0.101-0.106: docs/solver_trust.md).
     far_lod: groups of coarse triangles whose bounds' radius is below far_lod x their
     distance from a receiver are drawn through a coarser proxy (a third level, so that the
     cost per receiver does not grow with the mesh); 0 draws every coarse triangle, as the
