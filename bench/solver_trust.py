@@ -3,7 +3,7 @@ vertex, on whole meshes: the shared scans and characters at rest, every frame of
 characters' animations, the same meshes scaled from 0.001 to 1000, and every mesh moved far
 away, turned and mirrored (the cases of the invariance tests, which check two of them).
 
-Run: .venv/bin/python bench/solver_trust.py   (about 5 minutes on 2 cores)
+Run: .venv/bin/python bench/solver_trust.py   (about 9 minutes on 2 cores)
 Writes docs/solver_trust.md and its picture, docs/images/solver_trust.png. The tests
 (tests/test_solver_trust.py) check the same bounds on a fixed subset of receivers of the
 large scans.
