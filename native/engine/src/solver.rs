@@ -13,7 +13,7 @@ use rayon::prelude::*;
 
 use crate::disk_mask::{disk, Mask};
 use crate::error::{Error, Result};
-use crate::group_tree::{centre_distance2, is_far, GroupTree, FAR_LOD, LEAF};
+use crate::group_tree::{centre_distance2, GroupTree, FAR_LOD, LEAF};
 use crate::hierarchy::{default_coarse_triangles, morton_permutation, Hierarchy, GROUP};
 use crate::integrate::{Brdf, Quadrature};
 use crate::mesh::{box_of, check_finite, weld, welded_normals, Normalization, Vec3};
@@ -656,7 +656,7 @@ impl Solver {
         let node = self.group_tree.nodes[n];
         if node.children == LEAF {
             Turn::Group(node.first as usize)
-        } else if is_far(bounds, origin, lod2) {
+        } else if self.group_tree.is_far(n, bounds, origin, lod2) {
             Turn::Proxy
         } else {
             Turn::Open(node.children)
