@@ -30,11 +30,12 @@ class TransferSolver:
     whatever the surface distance (a coarse triangle that close cuts through the real
     surface and would shadow falsely); 0 uses the ring only. The default, 2.5, keeps every
     vertex of the shared meshes and characters as given within 0.1 AO of the exact path
-    (turned copies of the teapot and the armadillo reach 0.101-0.106: docs/solver_trust.md).
+    (a turned copy of the teapot reaches 0.101 on one vertex: docs/solver_trust.md).
     far_lod: groups of coarse triangles whose bounds' radius is below far_lod x their
     distance from a receiver are drawn through a coarser proxy (a third level, so that the
-    cost per receiver does not grow with the mesh); 0 draws every coarse triangle, as the
-    paper's two levels do.
+    cost per receiver does not grow with the mesh) when that proxy's error also subtends
+    less than about a cell of the mask; 0 draws every coarse triangle, as the paper's two
+    levels do.
     Positions are moved and scaled into a unit box internally (by the rest pose's centre and
     size), so results do not depend on the mesh's size or place.
     hierarchy=False makes every fine triangle a blocker (the exact path of `transfer`, with
