@@ -27,7 +27,7 @@ import hemishadow  # noqa: E402
 from animated import CHARACTERS, character_frames  # noqa: E402
 from make_figures import Y_UP_TO_Z_UP, render  # noqa: E402
 from meshes import MESHES, load_asset  # noqa: E402
-from test_solver_trust import TURNS, moved_away, turned  # noqa: E402
+from test_solver_trust import TURNS, moved_and_turned  # noqa: E402
 
 BANDS = 3  # AO is T_0; the band count does not change which blockers are used
 OUT = ROOT / "docs" / "solver_trust.md"
@@ -148,7 +148,7 @@ def placement_rows():
     changes, distances = [], []
     for name, make in STATIC.items():
         v, t = (np.asarray(a, dt) for a, dt in zip(make(), (np.float32, np.uint32)))
-        copies = [(v, t), (moved_away(v), t), *(turned(v, t, m) for m in TURNS.values())]
+        copies = [(v, t), *moved_and_turned(v, t)]
         solved = [ao(hemishadow.TransferSolver(*copy, bands=BANDS).solve(copy[0])) for copy in copies]
         exact = [ao(hemishadow.transfer(*copy, bands=BANDS)) for copy in copies]
         cells = [f"{np.abs(s - solved[0]).max():.3f} / {np.abs(e - exact[0]).max():.3f}"
