@@ -113,7 +113,9 @@ def test_potentially_visible_sets_keep_the_bound(animations, exact_animations, n
     print(f"\n{name}: PVS used on {used} of {len(poses)} frames, blockers x{np.mean(fewer):.2f}, "
           f"max |dAO| vs exact {worst:.4f}")
     assert worst <= 0.1
-    assert np.mean(fewer) < {"cesium_man.glb": 0.8, "fox.glb": 0.95, "rigged_figure.glb": 1.0}[name]
+    # Measured x0.84, x0.95, x0.75 (x0.71, x0.93 before the rasterizer skipped triangles under
+    # the lowest cell samples, which are much of what the sets leave out).
+    assert np.mean(fewer) < {"cesium_man.glb": 0.88, "fox.glb": 0.98, "rigged_figure.glb": 0.9}[name]
     far = poses[0] + np.array([0.0, 0.0, 0.5]) * np.ptp(poses[0], axis=0).max() * np.sin(poses[0][:, :1] * 40.0)
     pvs.solve(far)
     assert not pvs.stats["pvs"]

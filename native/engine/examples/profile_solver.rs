@@ -1,7 +1,9 @@
 //! Times `Solver::solve` on a mesh dumped by bench/dump_mesh.py (u32 frames, vertices,
 //! triangles; f32 frames x vertices x 3; u32 triangles x 3), for profiling without Python:
 //!
-//!     cargo run --release --example profile_solver -- mesh.bin [downsample] [table] [near_scale] [coarse triangles]
+//!     cargo run --release --example profile_solver -- mesh.bin [downsample] [table] [near_scale] [coarse triangles] [far_lod]
+//!
+//! A `-` leaves one argument at its default (`- - 2.5 - 0.9`).
 //!
 //! With `--features hemishadow-engine/census`, also prints what the rasterized triangles added to their masks
 //! (`rasterizer::census`; every mask is then drawn twice, so the times mean nothing).
@@ -9,7 +11,7 @@
 //! `PROFILE_SOLVES=N` times exactly N solves (for instruction counts under valgrind, which
 //! are steady where times on a shared machine are not); by default, up to 100 in 5 s.
 //!
-//! `PROFILE_AGAINST="downsample table near_scale coarse"` (the same optional arguments) builds
+//! `PROFILE_AGAINST="downsample table near_scale coarse far_lod"` (the same optional arguments) builds
 //! a second solver and alternates the two solve by solve, printing both: on a shared machine
 //! whose speed drifts by tens of percent within minutes, only such pairs compare settings.
 
@@ -39,16 +41,18 @@ fn cpu_ms() -> f64 {
 }
 
 /// A warm solver (one solve done) with the optional arguments `[downsample] [table]
-/// [near_scale] [coarse triangles]`, reuse off.
+/// [near_scale] [coarse triangles] [far_lod]`, reuse off.
 fn warm_solver(frames: &[Vec<[f32; 3]>], triangles: &[[u32; 3]], args: &[String]) -> Solver {
-    let arg = |i: usize| args.get(i).map(|s| s.parse::<f32>().unwrap());
+    let arg = |i: usize| args.get(i).filter(|s| *s != "-").map(|s| s.parse::<f32>().unwrap());
     let settings = Settings {
         downsample: arg(0).map(|d| d as usize),
         table_resolution: arg(1).map_or(Settings::default().table_resolution, |t| t as usize),
         ..Settings::default()
     };
     let near_scale = arg(2).unwrap_or(Blockers::default().near_scale);
-    let blockers = Blockers { reuse: false, coarse_triangles: arg(3).map(|c| c as usize), near_scale, ..Blockers::default() };
+    let far_lod = arg(4).unwrap_or(Blockers::default().far_lod);
+    let coarse_triangles = arg(3).map(|c| c as usize);
+    let blockers = Blockers { reuse: false, coarse_triangles, near_scale, far_lod, ..Blockers::default() };
     let mut solver = Solver::new(&frames[0], triangles, &settings, blockers).unwrap();
     solver.solve(&frames[1], None, None).unwrap();
     solver

@@ -32,17 +32,50 @@ fn negate(a: [f32; 3]) -> [f32; 3] {
 /// cone has no solid angle, and its edge planes would be numerical noise. Compared squared.
 pub(crate) const FLAT_CONE_SQUARED: f32 = 1e-12;
 
+/// Height (z of a unit direction in the receiver's frame) under every cell's sample: the
+/// lowest samples, rim cells' centroids, lie at z = 0.0860 (`disk_mask`; a test keeps this
+/// within 1 % below). A triangle whose directions all stay under it blocks no cell, whatever
+/// bits the table's rounded planes would set there; on the 8k Suzanne one drawn triangle in
+/// six lies there, thin triangles just above the horizon.
+pub(crate) const LOW_BAND_Z: f32 = 0.0855;
+
 /// Whether any corner of a triangle (local coordinates) is above the receiver's horizon.
 #[inline(always)]
 pub fn above_horizon(a: [f32; 3], b: [f32; 3], c: [f32; 3]) -> bool {
     a[2] > 0.0 || b[2] > 0.0 || c[2] > 0.0
 }
 
-/// Bit i set when lane i of `corners` has a corner above the horizon: `above_horizon` for
-/// every lane, branch-free (`lane_above_horizon`).
+/// Whether every direction of triangle (a, b, c) stays under `LOW_BAND_Z`. Each is the
+/// direction of a point q of the flat triangle: q's height is at most the highest corner's,
+/// and for s = a + b + c, |q| >= q . s / |s| >= min_k (p_k . s) / |s|. So q_z / |q| <
+/// LOW_BAND_Z whenever top / near < LOW_BAND_Z / |s|, compared squared (no roots; false for
+/// NaN and infinite corners). The same operations in the same order as the AVX2 packets'.
 #[inline(always)]
-pub fn lanes_above_horizon(corners: &LocalCorners) -> u32 {
-    lane_bits(&std::array::from_fn(|i| lane_above_horizon(corners, i)))
+pub fn below_low_band(a: [f32; 3], b: [f32; 3], c: [f32; 3]) -> bool {
+    let s = [a[0] + b[0] + c[0], a[1] + b[1] + c[1], a[2] + b[2] + c[2]];
+    let near = dot(a, s).min(dot(b, s)).min(dot(c, s));
+    let top = a[2].max(b[2]).max(c[2]);
+    near > 0.0 && top * top * dot(s, s) < LOW_BAND_Z * LOW_BAND_Z * (near * near)
+}
+
+/// Whether a triangle (local coordinates) may block a cell: a corner above the horizon and
+/// not wholly under the lowest samples.
+#[inline(always)]
+pub fn may_block(a: [f32; 3], b: [f32; 3], c: [f32; 3]) -> bool {
+    above_horizon(a, b, c) && !below_low_band(a, b, c)
+}
+
+/// Bit i set when lane i of `corners` may block a cell: `may_block` for every lane,
+/// branch-free (`lane_above_horizon`, `below_low_band`).
+#[inline(always)]
+pub fn lanes_that_may_block(corners: &LocalCorners) -> u32 {
+    lane_bits(&std::array::from_fn(|i| lane_may_block(corners, i)))
+}
+
+#[inline(always)]
+fn lane_may_block(corners: &LocalCorners, i: usize) -> bool {
+    let corner = |k: usize| [corners[k][0][i], corners[k][1][i], corners[k][2][i]];
+    lane_above_horizon(corners, i) & !below_low_band(corner(0), corner(1), corner(2))
 }
 
 /// Whether lane i of `corners` has a corner above the horizon, by the highest corner (a max
@@ -66,7 +99,7 @@ pub fn triangle_mask(table: &PlaneTable, a: [f32; 3], b: [f32; 3], c: [f32; 3]) 
 /// covers nothing), for callers that prefetch them before use.
 #[inline(always)]
 pub fn triangle_texels(table: &PlaneTable, a: [f32; 3], b: [f32; 3], c: [f32; 3]) -> Option<[u32; 3]> {
-    if !above_horizon(a, b, c) {
+    if !may_block(a, b, c) {
         return None;
     }
     let (ab, bc, ca) = (cross(a, b), cross(b, c), cross(c, a));
@@ -230,12 +263,11 @@ fn packet_codes(table: &PlaneTable, viewer: &Viewer, packet: &Packet, lanes: u32
 #[inline(always)]
 fn packet_codes_portable(table: &PlaneTable, viewer: &Viewer, packet: &Packet, lanes: u32, codes: &mut [[u32; LANES]; 3]) -> (u32, u32) {
     let (local, exclude) = (local_corners(viewer.origin, viewer.frame, packet), viewer.exclude);
-    // Above the horizon and not the receiver's own (one lane loop, one bit gather).
+    // May block a cell and not the receiver's own (one lane loop, one bit gather).
     let mut keep = [false; LANES];
     for (i, keep) in keep.iter_mut().enumerate() {
-        let above = lane_above_horizon(&local, i);
         let own = (packet.ids[0][i] == exclude) | (packet.ids[1][i] == exclude) | (packet.ids[2][i] == exclude);
-        *keep = above & !own;
+        *keep = lane_may_block(&local, i) & !own;
     }
     let candidates = lane_bits(&keep) & lanes;
     if candidates == 0 {
@@ -393,6 +425,54 @@ mod tests {
     fn triangle_below_horizon_covers_nothing() {
         let t = table();
         assert!(triangle_mask(&t, [1.0, 0.0, -0.1], [0.0, 1.0, -0.2], [-1.0, -1.0, -0.3]).is_none());
+    }
+
+    #[test]
+    fn the_low_band_lies_just_under_the_lowest_sample() {
+        let lowest = (0..MASK_SIDE * MASK_SIDE)
+            .filter_map(|i| cell_direction(i / MASK_SIDE, i % MASK_SIDE))
+            .map(|d| d[2])
+            .fold(f32::INFINITY, f32::min);
+        assert!(LOW_BAND_Z < lowest && LOW_BAND_Z > 0.99 * lowest, "lowest sample z {lowest}");
+    }
+
+    /// Random triangles near the horizon, at every distance and size: each one that
+    /// `below_low_band` rejects contains no cell's sample direction (its cone, tested in f64),
+    /// and the test rejects a fair share of those that contain none.
+    #[test]
+    fn triangles_under_the_low_band_contain_no_sample() {
+        let samples: Vec<[f64; 3]> = (0..MASK_SIDE * MASK_SIDE)
+            .filter_map(|i| cell_direction(i / MASK_SIDE, i % MASK_SIDE))
+            .map(|d| d.map(f64::from))
+            .collect();
+        let mut state = 0x2545_f491u32;
+        let mut unit = || crate::test_random::xorshift32(&mut state) as f32 / u32::MAX as f32;
+        let (mut rejected, mut empty) = (0, 0);
+        for _ in 0..20_000 {
+            let (distance, size, azimuth) = (0.05 + 10.0 * unit(), 0.02 + 2.0 * unit(), std::f32::consts::TAU * unit());
+            let centre = [distance * azimuth.cos(), distance * azimuth.sin(), distance * (0.12 * unit() - 0.02)];
+            let mut corner = || [0, 1, 2].map(|j| centre[j] + size * (unit() - 0.5) * if j == 2 { 0.1 } else { 1.0 });
+            let (a, b, c) = (corner(), corner(), corner());
+            let [a64, b64, c64] = [a, b, c].map(|p| p.map(f64::from));
+            let edges = [cross64(a64, b64), cross64(b64, c64), cross64(c64, a64)];
+            let det = dot64(edges[0], c64);
+            let inside = |d: &[f64; 3]| edges.iter().all(|e| dot64(*e, *d) * det >= 0.0);
+            let holds_a_sample = samples.iter().any(inside);
+            if below_low_band(a, b, c) {
+                assert!(!holds_a_sample, "rejected {a:?} {b:?} {c:?} holds a sample");
+                rejected += 1;
+            }
+            empty += usize::from(!holds_a_sample && above_horizon(a, b, c));
+        }
+        assert!(rejected * 4 > empty, "rejected {rejected} of {empty} above the horizon and empty");
+    }
+
+    fn cross64(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+        [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+    }
+
+    fn dot64(a: [f64; 3], b: [f64; 3]) -> f64 {
+        a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
     }
 
     #[test]

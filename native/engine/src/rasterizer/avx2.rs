@@ -1,5 +1,5 @@
 //! `Pipeline::rasterize_packet`'s arithmetic for one packet in AVX2 registers: the corners
-//! moved into the receiver's frame, the horizon and own-triangle tests, and the table codes of
+//! moved into the receiver's frame, the horizon, low-band and own-triangle tests, and the table codes of
 //! the edge planes (`edge_codes`, also for the scene's batches). The compiler's vectorisation
 //! of the portable loops spilled lanes to the stack and rebuilt the lane bits from scalar
 //! compares; this is the same sequence of operations lane by lane (multiplies and adds, never
@@ -10,7 +10,7 @@ use std::arch::x86_64::*;
 use crate::packets::{Packet, LANES};
 use crate::plane_table::PlaneTable;
 
-use super::{LocalCorners, Viewer, FLAT_CONE_SQUARED};
+use super::{LocalCorners, Viewer, FLAT_CONE_SQUARED, LOW_BAND_Z};
 
 type V3 = [__m256; 3];
 
@@ -49,6 +49,7 @@ pub unsafe fn packet_codes(table: &PlaneTable, viewer: &Viewer, packet: &Packet,
         _mm256_or_ps(_mm256_cmp_ps::<_CMP_GT_OQ>(pa[2], zero), _mm256_cmp_ps::<_CMP_GT_OQ>(pb[2], zero)),
         _mm256_cmp_ps::<_CMP_GT_OQ>(pc[2], zero),
     );
+    let above = _mm256_andnot_ps(below_low_band([pa, pb, pc]), above);
     let ex = _mm256_set1_epi32(exclude as i32);
     let id = |k: usize| _mm256_cmpeq_epi32(_mm256_loadu_si256(packet.ids[k].as_ptr() as *const __m256i), ex);
     let own = _mm256_castsi256_ps(_mm256_or_si256(_mm256_or_si256(id(0), id(1)), id(2)));
@@ -57,6 +58,17 @@ pub unsafe fn packet_codes(table: &PlaneTable, viewer: &Viewer, packet: &Packet,
         return (0, 0);
     }
     (keep, solid_codes(table, [pa, pb, pc], codes))
+}
+
+/// `super::below_low_band` of every lane, as a lane mask.
+#[inline(always)]
+unsafe fn below_low_band([pa, pb, pc]: [V3; 3]) -> __m256 {
+    let s: V3 = std::array::from_fn(|j| _mm256_add_ps(_mm256_add_ps(pa[j], pb[j]), pc[j]));
+    let near = _mm256_min_ps(_mm256_min_ps(dot(pa, s), dot(pb, s)), dot(pc, s));
+    let top = _mm256_max_ps(_mm256_max_ps(pa[2], pb[2]), pc[2]);
+    let height = _mm256_mul_ps(_mm256_mul_ps(top, top), dot(s, s));
+    let bound = _mm256_mul_ps(_mm256_set1_ps(LOW_BAND_Z * LOW_BAND_Z), _mm256_mul_ps(near, near));
+    _mm256_and_ps(_mm256_cmp_ps::<_CMP_GT_OQ>(near, _mm256_setzero_ps()), _mm256_cmp_ps::<_CMP_LT_OQ>(height, bound))
 }
 
 /// `edge_codes` in AVX2 registers, for batches of corners already in a receiver's frame (the

@@ -13,7 +13,7 @@ use crate::disk_mask::Mask;
 use crate::mesh::Vec3;
 use crate::packets::{Packet, LANES};
 use crate::plane_table::PlaneTable;
-use crate::rasterizer::{above_horizon, dot, lanes_above_horizon, LocalCorners, TriangleBatch};
+use crate::rasterizer::{dot, lanes_that_may_block, may_block, LocalCorners, TriangleBatch};
 use crate::transfer::Receiver;
 
 use super::affine::Affine;
@@ -275,13 +275,13 @@ fn emit<S: Sink>(local: &Local, position: impl Fn(usize) -> Vec3, compact: &Comp
     }
     for (t, tri) in compact.triangles.iter().enumerate() {
         let [a, b, c] = tri.map(|k| scratch[k as usize]);
-        if above_horizon(a, b, c) {
+        if may_block(a, b, c) {
             sink.triangle(a, b, c, compact.shown(t), tag);
         }
     }
 }
 
-/// The packets' triangles with a corner above the horizon, in the receiver's frame, to a
+/// The packets' triangles that may block a cell (`may_block`), in the receiver's frame, to a
 /// sink that takes packets; packets whose box lies below the horizon are skipped whole.
 #[inline(always)]
 fn emit_packets<S: Sink>(local: &Local, packets: &[Packet], facing: f32, sink: &mut S) {
@@ -290,7 +290,7 @@ fn emit_packets<S: Sink>(local: &Local, packets: &[Packet], facing: f32, sink: &
             continue;
         }
         let corners = local.apply_packet(packet);
-        let lanes = lanes_above_horizon(&corners) & packet.lanes;
+        let lanes = lanes_that_may_block(&corners) & packet.lanes;
         if lanes != 0 {
             sink.packet(&corners, lanes, facing);
         }
