@@ -116,9 +116,18 @@ fn main() {
 fn print_census() {
     let counts = hemishadow_engine::rasterizer::census::counts();
     let total: u64 = counts.iter().flatten().sum();
-    let [packets, offered, drawn] = hemishadow_engine::rasterizer::census::packets();
-    let per_packet = |n: u64| n as f64 / packets.max(1) as f64;
-    println!("{packets} packets: {:.1} lanes each, {:.1} drawn", per_packet(offered), per_packet(drawn));
+    let sources = hemishadow_engine::rasterizer::census::packets();
+    let all: u64 = sources.iter().map(|s| s[0]).sum();
+    for (name, [packets, offered, drawn, none]) in hemishadow_engine::rasterizer::census::SOURCES.iter().zip(sources) {
+        let per_packet = |n: u64| n as f64 / packets.max(1) as f64;
+        println!(
+            "{name:>8}: {packets} packets ({:.1} % of all): {:.1} lanes each, {:.1} drawn, {:.1} % with none drawn",
+            100.0 * packets as f64 / all.max(1) as f64,
+            per_packet(offered),
+            per_packet(drawn),
+            100.0 * per_packet(none)
+        );
+    }
     let share = |n: u64| 100.0 * n as f64 / total.max(1) as f64;
     println!("census of {total} triangles (highest corner's z: below 0.1 / below 0.5 / above; % of all)");
     for (name, row) in ["covers no cell", "covers only blocked cells", "blocks new cells"].iter().zip(counts) {

@@ -309,20 +309,42 @@ pub mod census {
         std::array::from_fn(|o| std::array::from_fn(|h| COUNTS[o][h].load(Ordering::Relaxed)))
     }
 
-    /// Packets with lanes to draw, their lanes, and the lanes drawn (above the horizon, not
-    /// the receiver's own).
-    static PACKETS: [AtomicU64; 3] = [const { AtomicU64::new(0) }; 3];
+    /// Where the solver's packets come from: a group tree node's proxy, a group's coarse
+    /// triangles, a cluster's fine triangles (set by the solver before it hands them over).
+    #[derive(Clone, Copy)]
+    pub enum Source {
+        Proxy,
+        Coarse,
+        Fine,
+    }
 
-    /// `[packets, lanes offered, lanes drawn]` since the start.
-    pub fn packets() -> [u64; 3] {
-        std::array::from_fn(|i| PACKETS[i].load(Ordering::Relaxed))
+    pub const SOURCES: [&str; 3] = ["proxies", "coarse", "fine"];
+
+    thread_local! {
+        static SOURCE: std::cell::Cell<Source> = const { std::cell::Cell::new(Source::Fine) };
+    }
+
+    pub fn set_source(source: Source) {
+        SOURCE.with(|s| s.set(source));
+    }
+
+    /// Per source, packets with lanes to draw, their lanes, the lanes drawn (may block a
+    /// cell, not the receiver's own), and the packets with none drawn.
+    static PACKETS: [[AtomicU64; 4]; 3] = [const { [const { AtomicU64::new(0) }; 4] }; 3];
+
+    /// Per source (`SOURCES`), `[packets, lanes offered, lanes drawn, packets with none drawn]`
+    /// since the start.
+    pub fn packets() -> [[u64; 4]; 3] {
+        std::array::from_fn(|k| std::array::from_fn(|i| PACKETS[k][i].load(Ordering::Relaxed)))
     }
 
     pub(super) fn packet(offered: u32, drawn: u32) {
         if offered != 0 {
-            PACKETS[0].fetch_add(1, Ordering::Relaxed);
-            PACKETS[1].fetch_add(offered.count_ones() as u64, Ordering::Relaxed);
-            PACKETS[2].fetch_add(drawn.count_ones() as u64, Ordering::Relaxed);
+            let counts = &PACKETS[SOURCE.with(|s| s.get()) as usize];
+            counts[0].fetch_add(1, Ordering::Relaxed);
+            counts[1].fetch_add(offered.count_ones() as u64, Ordering::Relaxed);
+            counts[2].fetch_add(drawn.count_ones() as u64, Ordering::Relaxed);
+            counts[3].fetch_add((drawn == 0) as u64, Ordering::Relaxed);
         }
     }
 

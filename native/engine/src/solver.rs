@@ -623,6 +623,8 @@ impl Solver {
                     }
                 }
                 Turn::Proxy => {
+                    #[cfg(feature = "census")]
+                    crate::rasterizer::census::set_source(crate::rasterizer::census::Source::Proxy);
                     for packet in tree.proxies.of(n) {
                         rasterized += pipeline.rasterize_packet(table, origin, &receiver.frame, packet, u32::MAX, r as u32, &mut mask);
                     }
@@ -691,6 +693,8 @@ impl Solver {
         }
         let mut rasterized = 0;
         let expanded = self.expanded_clusters(r, receiver, frame, first, clusters);
+        #[cfg(feature = "census")]
+        crate::rasterizer::census::set_source(crate::rasterizer::census::Source::Coarse);
         if self.blockers.hierarchy {
             for (p, packet) in self.coarse_packets.of(g).iter().enumerate() {
                 let far = (!expanded & seen) >> (p * LANES);
@@ -698,6 +702,8 @@ impl Solver {
             }
         }
         let mut bits = expanded & seen;
+        #[cfg(feature = "census")]
+        crate::rasterizer::census::set_source(crate::rasterizer::census::Source::Fine);
         while bits != 0 {
             let c = first + bits.trailing_zeros() as usize;
             bits &= bits - 1;
