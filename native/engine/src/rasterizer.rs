@@ -207,7 +207,7 @@ impl Pipeline {
 
     /// Rasterizes the lanes of `packet` set in `lanes` for a receiver at `origin` with tangent
     /// frame `frame`, except triangles with a corner `exclude` (the receiver's own vertex) and
-    /// triangles wholly below the horizon. Returns how many were rasterized. Call `drain`
+    /// triangles that cannot block a cell (`may_block`: below the horizon or the samples). Returns how many were rasterized. Call `drain`
     /// before reading `mask`.
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
@@ -244,8 +244,8 @@ pub(crate) struct Viewer<'a> {
     pub exclude: u32,
 }
 
-/// For the `lanes` of `packet` seen from `viewer`: the bit set of those to draw (a corner
-/// above the horizon, no corner the viewer's own vertex) and, when there are any, the bit set
+/// For the `lanes` of `packet` seen from `viewer`: the bit set of those to draw (`may_block`,
+/// no corner the viewer's own vertex) and, when there are any, the bit set
 /// of those whose cone has a solid angle, with every lane's edge codes in `codes`
 /// (`edge_codes`); `(0, 0)` and `codes` untouched when none is to be drawn. In AVX2 registers
 /// where the CPU has them (`avx2`, the same results bit for bit).

@@ -1,6 +1,6 @@
 //! `Pipeline::rasterize_packet`'s arithmetic for one packet in AVX2 registers: the corners
-//! moved into the receiver's frame, the horizon, low-band and own-triangle tests, and the table codes of
-//! the edge planes (`edge_codes`, also for the scene's batches). The compiler's vectorisation
+//! moved into the receiver's frame, the horizon, low-band and own-triangle tests, and the
+//! table codes of the edge planes (`edge_codes`, also for the scene's batches). The compiler's vectorisation
 //! of the portable loops spilled lanes to the stack and rebuilt the lane bits from scalar
 //! compares; this is the same sequence of operations lane by lane (multiplies and adds, never
 //! fused), so the codes and lanes are bit-identical to the portable path's.
