@@ -3,7 +3,7 @@ vertex, on whole meshes: the shared scans and characters at rest, every frame of
 characters' animations, the same meshes scaled from 0.001 to 1000, and every mesh moved far
 away, turned and mirrored (the cases of the invariance tests, which check two of them).
 
-Run: .venv/bin/python bench/solver_trust.py   (about 9 minutes on 2 cores)
+Run: .venv/bin/python bench/solver_trust.py   (about 2 minutes on 2 cores)
 Writes docs/solver_trust.md and its picture, docs/images/solver_trust.png. The tests
 (tests/test_solver_trust.py) check the same bounds on a fixed subset of receivers of the
 large scans.
@@ -49,9 +49,9 @@ def timed(function, *args):
     return value, time.perf_counter() - start
 
 
-def static_rows(pictured):
+def static_rows(pictured, as_given):
     """Table rows; fills `pictured` with (vertices, triangles, exact AO, solver AO) of the
-    meshes in PICTURED."""
+    meshes in PICTURED, and `as_given` with (solver AO, exact AO) of every mesh."""
     rows = []
     for name, make in STATIC.items():
         v, t = (np.asarray(a, dt) for a, dt in zip(make(), (np.float32, np.uint32)))
@@ -59,6 +59,7 @@ def static_rows(pictured):
         solver = hemishadow.TransferSolver(v, t, bands=BANDS, reuse=False)
         solved, solve_s = timed(lambda: ao(solver.solve(v)))
         d = np.abs(solved - exact)
+        as_given[name] = (solved, exact)
         if name in PICTURED:
             pictured[name] = (v, t, exact, solved)
         rows.append(f"| {name} | {len(v):,} | {d.max():.3f} | {(d > 0.1).sum()} | {np.median(d):.4f} | "
@@ -141,16 +142,22 @@ def distance_cell(d):
     return f"{d.max():.3f}" + (f" ({beyond} > {TRUST_BOUND})" if beyond else "")
 
 
-def placement_rows():
+def solve_once(v, t):
+    """Transfer of a solver built for (v, t), solved at v."""
+    return hemishadow.TransferSolver(v, t, bands=BANDS).solve(v)
+
+
+def placement_rows(as_given):
     """Per mesh, moved 50 sizes away and turned: the largest change of AO against the mesh as
-    given (solver against solver, exact path against exact path), and the largest |dAO|
-    between the solver and the exact path on each copy. Two lists of table rows."""
+    given (solver against solver, exact path against exact path; `as_given` from
+    `static_rows`), and the largest |dAO| between the solver and the exact path on each copy.
+    Two lists of table rows."""
     changes, distances = [], []
     for name, make in STATIC.items():
         v, t = (np.asarray(a, dt) for a, dt in zip(make(), (np.float32, np.uint32)))
-        copies = [(v, t), *moved_and_turned(v, t)]
-        solved = [ao(hemishadow.TransferSolver(*copy, bands=BANDS).solve(copy[0])) for copy in copies]
-        exact = [ao(hemishadow.transfer(*copy, bands=BANDS)) for copy in copies]
+        copies = moved_and_turned(v, t)
+        solved = [as_given[name][0], *(ao(solve_once(*copy)) for copy in copies)]
+        exact = [as_given[name][1], *(ao(hemishadow.transfer(*copy, bands=BANDS)) for copy in copies)]
         cells = [f"{np.abs(s - solved[0]).max():.3f} / {np.abs(e - exact[0]).max():.3f}"
                  for s, e in zip(solved[1:], exact[1:])]
         changes.append(f"| {name} | " + " | ".join(cells) + " |")
@@ -163,9 +170,9 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=pathlib.Path, default=OUT, help=f"Markdown file to write (default: {OUT})")
     out = parser.parse_args().out
-    pictured = {}
-    static, animated, scaled = static_rows(pictured), animation_rows(), scale_rows()
-    placed, distances = placement_rows()
+    pictured, as_given = {}, {}
+    static, animated, scaled = static_rows(pictured, as_given), animation_rows(), scale_rows()
+    placed, distances = placement_rows(as_given)
     notes = draw_figure(pictured, FIGURE)
     text = [
         "# How far the solver is from the exact path",

@@ -114,7 +114,6 @@ impl GroupTree {
     }
 }
 
-
 /// The squared distance from `origin` to the centre of box `b`.
 #[inline(always)]
 pub fn centre_distance2(b: &[Vec3; 2], origin: Vec3) -> f32 {
