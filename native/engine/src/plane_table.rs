@@ -26,6 +26,7 @@ use rayon::prelude::*;
 use crate::disk_mask::{cell_direction, Mask, MASK_SIDE, MASK_WORDS};
 use crate::error::{Error, Result};
 use crate::large_pages::LargePageVec;
+use crate::packets::LANES;
 
 mod drain;
 
@@ -341,30 +342,40 @@ impl PlaneTable {
     #[inline]
     #[target_feature(enable = "avx2")]
     pub unsafe fn codes_avx2(&self, x: __m256, y: __m256, z: __m256) -> __m256i {
+        self.codes_avx2_inlined(x, y, z)
+    }
+
+    /// `codes_avx2` for kernels compiled for AVX2, into which it inlines (no closures: those
+    /// would be compiled without AVX2 and keep the intrinsics as calls).
+    ///
+    /// # Safety
+    /// The CPU must support AVX2.
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    pub unsafe fn codes_avx2_inlined(&self, x: __m256, y: __m256, z: __m256) -> __m256i {
         let sign = _mm256_set1_ps(-0.0);
         let (ax, ay, az) = (_mm256_andnot_ps(sign, x), _mm256_andnot_ps(sign, y), _mm256_andnot_ps(sign, z));
         let x_major = _mm256_and_ps(_mm256_cmp_ps::<_CMP_GE_OQ>(ax, ay), _mm256_cmp_ps::<_CMP_GE_OQ>(ax, az));
         let y_major = _mm256_andnot_ps(x_major, _mm256_cmp_ps::<_CMP_GE_OQ>(ay, az));
-        let pick = |xv: __m256, yv: __m256, zv: __m256| _mm256_blendv_ps(_mm256_blendv_ps(zv, yv, y_major), xv, x_major);
-        let (major, along) = (pick(ax, ay, az), pick(x, y, z));
+        let major = _mm256_blendv_ps(_mm256_blendv_ps(az, ay, y_major), ax, x_major);
+        let along = _mm256_blendv_ps(_mm256_blendv_ps(z, y, y_major), x, x_major);
         let u = _mm256_blendv_ps(x, y, x_major);
         let v = _mm256_blendv_ps(y, z, _mm256_or_ps(x_major, y_major));
         let half = _mm256_set1_ps(0.5 * self.resolution as f32);
         let last = _mm256_set1_ps((self.resolution - 1) as f32);
         let scale = _mm256_div_ps(half, major);
-        let texel = |w: __m256| {
-            let w = _mm256_add_ps(_mm256_mul_ps(w, scale), half);
-            _mm256_cvttps_epi32(_mm256_min_ps(_mm256_max_ps(w, _mm256_setzero_ps()), last))
-        };
-        let within = _mm256_add_epi32(_mm256_mullo_epi32(texel(v), _mm256_set1_epi32(self.resolution as i32)), texel(u));
+        let texel_u = _mm256_cvttps_epi32(_mm256_min_ps(_mm256_max_ps(_mm256_add_ps(_mm256_mul_ps(u, scale), half), _mm256_setzero_ps()), last));
+        let texel_v = _mm256_cvttps_epi32(_mm256_min_ps(_mm256_max_ps(_mm256_add_ps(_mm256_mul_ps(v, scale), half), _mm256_setzero_ps()), last));
+        let within = _mm256_add_epi32(_mm256_mullo_epi32(texel_v, _mm256_set1_epi32(self.resolution as i32)), texel_u);
         let c = self.codes;
-        let int = |m: __m256| _mm256_castps_si256(m);
-        let stride = |a: u32| _mm256_set1_epi32((a * c.axis_stride) as i32);
-        let axis = _mm256_blendv_epi8(_mm256_blendv_epi8(stride(2), stride(1), int(y_major)), stride(0), int(x_major));
-        let negative = int(_mm256_cmp_ps::<_CMP_LT_OQ>(along, _mm256_setzero_ps()));
-        let of = |field: u32| _mm256_and_si256(negative, _mm256_set1_epi32(field as i32));
-        let code = _mm256_add_epi32(_mm256_add_epi32(axis, of(c.negative_offset)), _mm256_xor_si256(within, of(c.flip)));
-        _mm256_or_si256(code, of(c.complement))
+        let (stride_x, stride_y, stride_z) = (_mm256_setzero_si256(), _mm256_set1_epi32(c.axis_stride as i32), _mm256_set1_epi32((2 * c.axis_stride) as i32));
+        let axis = _mm256_blendv_epi8(_mm256_blendv_epi8(stride_z, stride_y, _mm256_castps_si256(y_major)), stride_x, _mm256_castps_si256(x_major));
+        let negative = _mm256_castps_si256(_mm256_cmp_ps::<_CMP_LT_OQ>(along, _mm256_setzero_ps()));
+        let negative_offset = _mm256_and_si256(negative, _mm256_set1_epi32(c.negative_offset as i32));
+        let flip = _mm256_and_si256(negative, _mm256_set1_epi32(c.flip as i32));
+        let complement = _mm256_and_si256(negative, _mm256_set1_epi32(c.complement as i32));
+        let code = _mm256_add_epi32(_mm256_add_epi32(axis, negative_offset), _mm256_xor_si256(within, flip));
+        _mm256_or_si256(code, complement)
     }
 
     /// The mask of a texel of the whole table (`texel`).
@@ -394,6 +405,46 @@ impl PlaneTable {
             use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
             // No bounds check: the address is only a hint (a code's fetch checks it).
             let p = self.masks.as_ptr().wrapping_add((code & !COMPLEMENT) as usize) as *const i8;
+            // SAFETY: prefetching is a hint and never faults, whatever the address.
+            unsafe {
+                _mm_prefetch(p, _MM_HINT_T0);
+                _mm_prefetch(p.wrapping_add(64), _MM_HINT_T0);
+            }
+        }
+    }
+
+    /// Where the masks of `codes` lie (`Fetches`), lane by lane; written so that it vectorises.
+    #[inline(always)]
+    pub fn fetches(&self, codes: &[[u32; LANES]; 3]) -> Fetches {
+        let last = ((self.masks.len() - 1) * MASK_BYTES) as u32;
+        let mut out = Fetches::default();
+        for e in 0..3 {
+            for i in 0..LANES {
+                let code = codes[e][i];
+                out.offsets[e][i] = ((code & !COMPLEMENT) << MASK_BYTES.trailing_zeros()).min(last);
+                out.flips[e][i] = (code as i32) >> 31;
+            }
+        }
+        out
+    }
+
+    /// Asks the CPU to bring the masks of the `lanes` of `fetches` into cache ahead of use.
+    #[inline(always)]
+    pub fn prefetch(&self, fetches: &Fetches, lanes: u32) {
+        let mut bits = lanes;
+        while bits != 0 {
+            let i = bits.trailing_zeros() as usize;
+            bits &= bits - 1;
+            (0..3).for_each(|e| self.prefetch_bytes(fetches.offsets[e][i]));
+        }
+    }
+
+    #[inline(always)]
+    fn prefetch_bytes(&self, offset: u32) {
+        #[cfg(target_arch = "x86_64")]
+        {
+            use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
+            let p = (self.masks.as_ptr() as *const i8).wrapping_add(offset as usize);
             // SAFETY: prefetching is a hint and never faults, whatever the address.
             unsafe {
                 _mm_prefetch(p, _MM_HINT_T0);
@@ -433,6 +484,18 @@ impl PlaneTable {
 /// than 2^31 texels (at most 6 x 512 x 512).
 const COMPLEMENT: u32 = 1 << 31;
 
+const MASK_BYTES: usize = std::mem::size_of::<Mask>();
+
+/// Where the masks of the three edge codes of `LANES` triangles lie (`PlaneTable::fetches`):
+/// byte offsets of their stored masks, clamped to the table so that reading them needs no
+/// check, and their flips (0, or all ones for a complemented code). Made once per packet in
+/// vector code, where the drain computed them triangle by triangle.
+#[derive(Clone, Copy, Default)]
+pub struct Fetches {
+    offsets: [[u32; LANES]; 3],
+    flips: [[i32; LANES]; 3],
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -448,6 +511,22 @@ mod tests {
             let differ = (0..direct.len()).filter(|&t| table.mask_at(t as u32) != direct[t]).count();
             assert_eq!(differ, 0, "resolution {resolution}");
         }
+    }
+
+    #[test]
+    fn fetches_stay_within_the_table_whatever_the_codes() {
+        let table = PlaneTable::shared(12).unwrap();
+        let last = ((table.masks.len() - 1) * MASK_BYTES) as u32;
+        let wild = [u32::MAX, COMPLEMENT, COMPLEMENT - 1, table.masks.len() as u32, 1 << 25, 0, 7, COMPLEMENT | 3];
+        let fetches = table.fetches(&[wild, wild.map(|c| c.rotate_left(1)), wild.map(|c| c ^ COMPLEMENT)]);
+        for e in 0..3 {
+            for i in 0..LANES {
+                let offset = fetches.offsets[e][i];
+                assert!(offset <= last && offset as usize % MASK_BYTES == 0, "edge {e}, lane {i}: offset {offset}");
+            }
+        }
+        assert_eq!(fetches.offsets[0][6], 7 * MASK_BYTES as u32);
+        assert_eq!((fetches.flips[0][1], fetches.flips[0][5], fetches.flips[2][5]), (-1, 0, -1));
     }
 
     #[test]

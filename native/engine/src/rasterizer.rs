@@ -11,7 +11,7 @@ mod avx2;
 use crate::disk_mask::Mask;
 use crate::integrate::Frame;
 use crate::packets::{Packet, LANES};
-use crate::plane_table::PlaneTable;
+use crate::plane_table::{Fetches, PlaneTable};
 
 #[inline(always)]
 pub fn cross(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
@@ -173,9 +173,9 @@ fn lane_bits(lanes: &[bool; LANES]) -> u32 {
 /// (docs/solver_speed.md).
 #[derive(Default)]
 pub struct Pipeline {
-    /// Table codes (`PlaneTable::code`) of the previous packet (`[edge][lane]`) and its kept
-    /// lanes: prefetched, not yet OR-ed.
-    pending: [[u32; LANES]; 3],
+    /// Where the masks of the previous packet's edge codes lie, and its kept lanes:
+    /// prefetched, not yet OR-ed.
+    pending: Fetches,
     pending_lanes: u32,
     /// Every mask drawn so far, OR-ed at once rather than a packet late (`census`).
     #[cfg(feature = "census")]
@@ -185,22 +185,37 @@ pub struct Pipeline {
 impl Pipeline {
     /// Prefetches the masks of the `lanes` of `codes`, ORs the pending ones into `mask` and
     /// makes these pending.
+    ///
+    /// # Safety
+    /// With `AVX2`, the CPU must support AVX2.
     #[inline(always)]
-    fn advance(&mut self, table: &PlaneTable, codes: &[[u32; LANES]; 3], lanes: u32, mask: &mut Mask) {
-        let mut bits = lanes;
-        while bits != 0 {
-            let i = bits.trailing_zeros() as usize;
-            bits &= bits - 1;
-            (0..3).for_each(|e| table.prefetch_code(codes[e][i]));
-        }
-        self.drain(table, mask);
-        self.pending = *codes;
+    unsafe fn advance<const AVX2: bool>(&mut self, table: &PlaneTable, codes: &[[u32; LANES]; 3], lanes: u32, mask: &mut Mask) {
+        let next = table.fetches(codes);
+        table.prefetch(&next, lanes);
+        self.drain_pending::<AVX2>(table, mask);
+        self.pending = next;
         self.pending_lanes = lanes;
     }
 
     /// ORs every pending triangle into `mask`.
     #[inline(always)]
     pub fn drain(&mut self, table: &PlaneTable, mask: &mut Mask) {
+        // SAFETY: the portable drain dispatches at run time.
+        unsafe { self.drain_pending::<false>(table, mask) }
+    }
+
+    /// `drain`, with `AVX2` straight into the AVX2 drain, which inlines into AVX2 kernels.
+    ///
+    /// # Safety
+    /// With `AVX2`, the CPU must support AVX2.
+    #[inline(always)]
+    unsafe fn drain_pending<const AVX2: bool>(&mut self, table: &PlaneTable, mask: &mut Mask) {
+        #[cfg(target_arch = "x86_64")]
+        if AVX2 {
+            table.or_triangles_avx2_inlined(&self.pending, self.pending_lanes, mask);
+            self.pending_lanes = 0;
+            return;
+        }
         table.or_triangles(&self.pending, self.pending_lanes, mask);
         self.pending_lanes = 0;
     }
@@ -221,17 +236,46 @@ impl Pipeline {
         exclude: u32,
         mask: &mut Mask,
     ) -> u32 {
+        // SAFETY: the portable kernel dispatches at run time.
+        unsafe { self.rasterize_viewed::<false>(table, &Viewer { origin, frame, exclude }, packet, lanes, mask) }
+    }
+
+    /// `rasterize_packet` for every packet of `batch`, each with the lanes given beside it,
+    /// seen from `viewer`. In one call, so that the AVX2 kernel (`avx2::rasterize_batch`)
+    /// runs the batch with its packet arithmetic and drain inlined: a call per packet, each
+    /// making the viewer's broadcasts again, cost about 5 % of the solver's instructions.
+    #[inline(always)]
+    pub(crate) fn rasterize_batch(&mut self, table: &PlaneTable, viewer: &Viewer, batch: &[(&Packet, u32)], mask: &mut Mask) -> u32 {
+        #[cfg(target_arch = "x86_64")]
+        if std::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU supports AVX2.
+            return unsafe { avx2::rasterize_batch(self, table, viewer, batch, mask) };
+        }
+        // SAFETY: the portable kernel dispatches at run time.
+        batch.iter().map(|&(packet, lanes)| unsafe { self.rasterize_viewed::<false>(table, viewer, packet, lanes, mask) }).sum()
+    }
+
+    /// `rasterize_packet` seen from `viewer`; with `AVX2`, through the AVX2 kernels directly.
+    ///
+    /// # Safety
+    /// With `AVX2`, the CPU must support AVX2.
+    #[inline(always)]
+    unsafe fn rasterize_viewed<const AVX2: bool>(&mut self, table: &PlaneTable, viewer: &Viewer, packet: &Packet, lanes: u32, mask: &mut Mask) -> u32 {
         let mut codes = [[0u32; LANES]; 3];
-        let viewer = Viewer { origin, frame, exclude };
-        let (candidates, solid) = packet_codes(table, &viewer, packet, lanes & packet.lanes, &mut codes);
+        let lanes = lanes & packet.lanes;
+        #[cfg(target_arch = "x86_64")]
+        let (candidates, solid) =
+            if AVX2 { avx2::packet_codes_inlined(table, viewer, packet, lanes, &mut codes) } else { packet_codes(table, viewer, packet, lanes, &mut codes) };
+        #[cfg(not(target_arch = "x86_64"))]
+        let (candidates, solid) = packet_codes(table, viewer, packet, lanes, &mut codes);
         #[cfg(feature = "census")]
-        census::packet(lanes & packet.lanes, candidates);
+        census::packet(lanes, candidates);
         if candidates == 0 {
             return 0;
         }
         #[cfg(feature = "census")]
-        census::count(table, &local_corners(origin, frame, packet), &codes, candidates & solid, &mut self.seen);
-        self.advance(table, &codes, candidates & solid, mask);
+        census::count(table, &local_corners(viewer.origin, viewer.frame, packet), &codes, candidates & solid, &mut self.seen);
+        self.advance::<AVX2>(table, &codes, candidates & solid, mask);
         candidates.count_ones()
     }
 }
@@ -397,7 +441,8 @@ impl TriangleBatch {
     pub fn push_packet(&mut self, table: &PlaneTable, corners: &LocalCorners, lanes: u32, mask: &mut Mask) {
         let mut codes = [[0u32; LANES]; 3];
         let solid = edge_codes(table, corners, &mut codes);
-        self.pipeline.advance(table, &codes, solid & lanes, mask);
+        // SAFETY: the portable drain dispatches at run time.
+        unsafe { self.pipeline.advance::<false>(table, &codes, solid & lanes, mask) };
     }
 
     /// Rasterizes everything queued into `mask` and empties the batch and the pipeline.
@@ -412,7 +457,8 @@ impl TriangleBatch {
         let mut codes = [[0u32; LANES]; 3];
         let solid = edge_codes(table, &self.corners, &mut codes);
         let queued = (1u32 << self.len) - 1;
-        self.pipeline.advance(table, &codes, solid & queued, mask);
+        // SAFETY: the portable drain dispatches at run time.
+        unsafe { self.pipeline.advance::<false>(table, &codes, solid & queued, mask) };
         self.len = 0;
     }
 }

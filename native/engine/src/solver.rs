@@ -21,7 +21,7 @@ use crate::progress::{par_rows, par_rows_with, Progress};
 use crate::pvs::{contributing, node_unit, Pvs};
 use crate::plane_table::PlaneTable;
 use crate::packets::{Packet, PacketLists, LANES};
-use crate::rasterizer::Pipeline;
+use crate::rasterizer::{Pipeline, Viewer};
 use crate::caster_reuse::{CasterCache, CasterPlan, Kept};
 use crate::scene::casters::Casters;
 use crate::sh::ShBasis;
@@ -599,6 +599,8 @@ impl Solver {
         let pvs = self.pvs.as_ref().filter(|_| frame.use_pvs);
         let mut mask = Mask::EMPTY;
         let mut pipeline = Pipeline::default();
+        let viewer = Viewer { origin, frame: &receiver.frame, exclude: r as u32 };
+        let mut batch: Vec<(&Packet, u32)> = Vec::with_capacity(64);
         let mut rasterized = 0u32;
         let lod2 = self.far_lod2();
         let mut stack: Vec<u32> = Vec::with_capacity(64);
@@ -617,7 +619,8 @@ impl Solver {
             }
             match self.turn(n, bounds, origin, lod2) {
                 Turn::Group(g) => {
-                    rasterized += self.group_blockers(g, r, sets, frame, receiver, &mut pipeline, &mut mask);
+                    let draw = Draw { viewer: &viewer, pipeline: &mut pipeline, batch: &mut batch, mask: &mut mask };
+                    rasterized += self.group_blockers(g, r, sets, frame, receiver, draw);
                     if mask == self.disk {
                         break;
                     }
@@ -625,9 +628,9 @@ impl Solver {
                 Turn::Proxy => {
                     #[cfg(feature = "census")]
                     crate::rasterizer::census::set_source(crate::rasterizer::census::Source::Proxy);
-                    for packet in tree.proxies.of(n) {
-                        rasterized += pipeline.rasterize_packet(table, origin, &receiver.frame, packet, u32::MAX, r as u32, &mut mask);
-                    }
+                    batch.clear();
+                    batch.extend(tree.proxies.of(n).iter().map(|packet| (packet, u32::MAX)));
+                    rasterized += pipeline.rasterize_batch(table, &viewer, &batch, &mut mask);
                 }
                 Turn::Open([first, second]) => {
                     let proxy_kept = sets.is_some_and(|pvs| pvs.keeps_any(r, pvs.node_unit(n)..pvs.node_unit(n + 1)));
@@ -681,10 +684,10 @@ impl Solver {
 
     /// Group `g`'s blockers for receiver `r`: see `own_mask_portable`.
     /// `sets`: the potentially visible sets, when they choose the group's clusters.
-    #[allow(clippy::too_many_arguments)]
     #[inline(always)]
-    fn group_blockers(&self, g: usize, r: usize, sets: Option<&Pvs>, frame: &Frame, receiver: &Receiver, pipeline: &mut Pipeline, mask: &mut Mask) -> u32 {
-        let (h, table, origin) = (&self.hierarchy, &*self.table, receiver.origin);
+    fn group_blockers<'a>(&'a self, g: usize, r: usize, sets: Option<&Pvs>, frame: &Frame, receiver: &Receiver, draw: Draw<'_, '_, 'a>) -> u32 {
+        let (h, table) = (&self.hierarchy, &*self.table);
+        let Draw { viewer, pipeline, batch, mask } = draw;
         let first = g * GROUP;
         let clusters = (first + GROUP).min(h.clusters()) - first;
         let seen = sets.map_or(u32::MAX, |pvs| bits_of(pvs.of(r), first, clusters));
@@ -696,28 +699,35 @@ impl Solver {
         #[cfg(feature = "census")]
         crate::rasterizer::census::set_source(crate::rasterizer::census::Source::Coarse);
         if self.blockers.hierarchy {
-            for (p, packet) in self.coarse_packets.of(g).iter().enumerate() {
-                let far = (!expanded & seen) >> (p * LANES);
-                rasterized += pipeline.rasterize_packet(table, origin, &receiver.frame, packet, far, r as u32, mask);
-            }
+            let far = !expanded & seen;
+            batch.clear();
+            batch.extend(self.coarse_packets.of(g).iter().enumerate().map(|(p, packet)| (packet, far >> (p * LANES))));
+            rasterized += pipeline.rasterize_batch(table, viewer, batch, mask);
         }
         let mut bits = expanded & seen;
         #[cfg(feature = "census")]
         crate::rasterizer::census::set_source(crate::rasterizer::census::Source::Fine);
+        batch.clear();
         while bits != 0 {
             let c = first + bits.trailing_zeros() as usize;
             bits &= bits - 1;
             if self.culled(receiver, &frame.bounds[c]) {
                 continue;
             }
-            for packet in self.fine_packets.of(c) {
-                if !(self.blockers.cull && receiver.clearly_below_horizon(&packet.bounds)) {
-                    rasterized += pipeline.rasterize_packet(table, origin, &receiver.frame, packet, u32::MAX, r as u32, mask);
-                }
-            }
+            let above = self.fine_packets.of(c).iter().filter(|p| !(self.blockers.cull && receiver.clearly_below_horizon(&p.bounds)));
+            batch.extend(above.map(|packet| (packet, u32::MAX)));
         }
-        rasterized
+        rasterized + pipeline.rasterize_batch(table, viewer, batch, mask)
     }
+}
+
+/// Where a walk draws its blockers: the receiver seen from, the pipeline, a batch to gather
+/// packets in (`Pipeline::rasterize_batch`) and the mask.
+struct Draw<'v, 'd, 'a> {
+    viewer: &'v Viewer<'v>,
+    pipeline: &'d mut Pipeline,
+    batch: &'d mut Vec<(&'a Packet, u32)>,
+    mask: &'d mut Mask,
 }
 
 /// What computing (or reusing) one receiver left: the masks of its own and of the still

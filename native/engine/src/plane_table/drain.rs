@@ -11,46 +11,65 @@
 #[cfg(target_arch = "x86_64")]
 use std::arch::x86_64::*;
 
-use super::PlaneTable;
+use super::{Fetches, PlaneTable, MASK_BYTES};
 use crate::disk_mask::Mask;
-use crate::packets::LANES;
 
 impl PlaneTable {
-    /// ORs into `mask` the triangles of the `lanes` of `codes` (`[edge][lane]`, `code`): for
-    /// each, `triangle_of_codes`.
+    /// ORs into `mask` the triangles of the `lanes` of `fetches` (`[edge][lane]`): for each,
+    /// the AND of its three edges' masks.
     #[inline(always)]
-    pub fn or_triangles(&self, codes: &[[u32; LANES]; 3], lanes: u32, mask: &mut Mask) {
+    pub fn or_triangles(&self, fetches: &Fetches, lanes: u32, mask: &mut Mask) {
         #[cfg(target_arch = "x86_64")]
         if std::is_x86_feature_detected!("avx2") {
             // SAFETY: the CPU supports AVX2.
-            return unsafe { self.or_triangles_avx2(codes, lanes, mask) };
+            return unsafe { self.or_triangles_avx2(fetches, lanes, mask) };
         }
-        self.or_triangles_portable(codes, lanes, mask)
+        self.or_triangles_portable(fetches, lanes, mask)
     }
 
-    fn or_triangles_portable(&self, codes: &[[u32; LANES]; 3], lanes: u32, mask: &mut Mask) {
-        let mut bits = lanes;
-        while bits != 0 {
-            let i = bits.trailing_zeros() as usize;
-            bits &= bits - 1;
-            mask.or_assign(&self.triangle_of_codes([codes[0][i], codes[1][i], codes[2][i]]));
-        }
-    }
-
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
-    unsafe fn or_triangles_avx2(&self, codes: &[[u32; LANES]; 3], lanes: u32, mask: &mut Mask) {
-        const WORDS: usize = std::mem::size_of::<Mask>() / 32;
-        let mut acc = [_mm256_setzero_si256(); WORDS];
+    fn or_triangles_portable(&self, fetches: &Fetches, lanes: u32, mask: &mut Mask) {
         let mut bits = lanes;
         while bits != 0 {
             let i = bits.trailing_zeros() as usize;
             bits &= bits - 1;
             let edge = |e: usize| {
-                let code = codes[e][i];
-                (self.stored(code) as *const Mask as *const __m256i, _mm256_set1_epi32((code as i32) >> 31))
+                let stored = &self.masks[fetches.offsets[e][i] as usize / MASK_BYTES];
+                let flip = &self.flips[(fetches.flips[e][i] & 1) as usize];
+                Mask(std::array::from_fn(|w| stored.0[w] ^ flip.0[w]))
             };
-            let [(a, fa), (b, fb), (c, fc)] = [edge(0), edge(1), edge(2)];
+            mask.or_assign(&Mask::and3(&edge(0), &edge(1), &edge(2)));
+        }
+    }
+
+    /// `or_triangles` in AVX2 registers, for callers compiled for AVX2 (where it inlines).
+    ///
+    /// # Safety
+    /// The CPU must support AVX2.
+    #[cfg(target_arch = "x86_64")]
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    pub(crate) unsafe fn or_triangles_avx2(&self, fetches: &Fetches, lanes: u32, mask: &mut Mask) {
+        self.or_triangles_avx2_inlined(fetches, lanes, mask)
+    }
+
+    /// `or_triangles_avx2` for kernels compiled for AVX2, into which it inlines (no closures:
+    /// those would be compiled without AVX2 and keep the intrinsics as calls).
+    ///
+    /// # Safety
+    /// The CPU must support AVX2.
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    pub(crate) unsafe fn or_triangles_avx2_inlined(&self, fetches: &Fetches, lanes: u32, mask: &mut Mask) {
+        const WORDS: usize = MASK_BYTES / 32;
+        let base = self.masks.as_ptr() as *const u8;
+        let mut acc = [_mm256_setzero_si256(); WORDS];
+        let mut bits = lanes;
+        while bits != 0 {
+            let i = bits.trailing_zeros() as usize;
+            bits &= bits - 1;
+            // SAFETY: `fetches` clamps every offset to the last stored mask.
+            let [a, b, c] = [0, 1, 2].map(|e| base.add(fetches.offsets[e][i] as usize) as *const __m256i);
+            let (fa, fb, fc) = (_mm256_set1_epi32(fetches.flips[0][i]), _mm256_set1_epi32(fetches.flips[1][i]), _mm256_set1_epi32(fetches.flips[2][i]));
             for (w, acc) in acc.iter_mut().enumerate() {
                 let x = _mm256_xor_si256(_mm256_load_si256(a.add(w)), fa);
                 let y = _mm256_xor_si256(_mm256_load_si256(b.add(w)), fb);
@@ -69,6 +88,7 @@ impl PlaneTable {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::packets::LANES;
     use crate::disk_mask::disk;
     use crate::test_random::xorshift32 as next;
 
@@ -96,13 +116,13 @@ mod tests {
                     expected.or_assign(&table.triangle_of_codes([codes[0][i], codes[1][i], codes[2][i]]));
                 }
                 let mut portable = start;
-                table.or_triangles_portable(&codes, lanes, &mut portable);
+                table.or_triangles_portable(&table.fetches(&codes), lanes, &mut portable);
                 assert_eq!(portable, expected, "portable, resolution {resolution}, round {round}");
                 #[cfg(target_arch = "x86_64")]
                 if std::is_x86_feature_detected!("avx2") {
                     let mut simd = start;
                     // SAFETY: the CPU supports AVX2.
-                    unsafe { table.or_triangles_avx2(&codes, lanes, &mut simd) };
+                    unsafe { table.or_triangles_avx2(&table.fetches(&codes), lanes, &mut simd) };
                     assert_eq!(simd, expected, "AVX2, resolution {resolution}, round {round}");
                 }
             }

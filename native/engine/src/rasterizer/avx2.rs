@@ -7,10 +7,11 @@
 
 use std::arch::x86_64::*;
 
+use crate::disk_mask::Mask;
 use crate::packets::{Packet, LANES};
 use crate::plane_table::PlaneTable;
 
-use super::{LocalCorners, Viewer, FLAT_CONE_SQUARED, LOW_BAND_Z};
+use super::{LocalCorners, Pipeline, Viewer, FLAT_CONE_SQUARED, LOW_BAND_Z};
 
 type V3 = [__m256; 3];
 
@@ -30,20 +31,52 @@ unsafe fn cross(a: V3, b: V3) -> V3 {
 
 #[inline(always)]
 unsafe fn splat(v: [f32; 3]) -> V3 {
-    v.map(|c| _mm256_set1_ps(c))
+    [_mm256_set1_ps(v[0]), _mm256_set1_ps(v[1]), _mm256_set1_ps(v[2])]
+}
+
+/// Corner `k` of every lane of `packet` in the frame (t, b, n) at `o`.
+#[inline(always)]
+unsafe fn local_corner(packet: &Packet, k: usize, o: V3, [t, b, n]: [V3; 3]) -> V3 {
+    let c = &packet.corners[k];
+    let d = [
+        _mm256_sub_ps(_mm256_loadu_ps(c[0].as_ptr()), o[0]),
+        _mm256_sub_ps(_mm256_loadu_ps(c[1].as_ptr()), o[1]),
+        _mm256_sub_ps(_mm256_loadu_ps(c[2].as_ptr()), o[2]),
+    ];
+    [dot(d, t), dot(d, b), dot(d, n)]
+}
+
+/// Lanes of `packet` with corner `k` the vertex `exclude`, as a lane mask.
+#[inline(always)]
+unsafe fn is_vertex(packet: &Packet, k: usize, exclude: __m256i) -> __m256i {
+    _mm256_cmpeq_epi32(_mm256_loadu_si256(packet.ids[k].as_ptr() as *const __m256i), exclude)
+}
+
+/// `Pipeline::rasterize_batch` in AVX2 registers: one function compiled for AVX2, into which
+/// the packet arithmetic and the drain inline.
+#[target_feature(enable = "avx2")]
+pub(super) unsafe fn rasterize_batch(pipeline: &mut Pipeline, table: &PlaneTable, viewer: &Viewer, batch: &[(&Packet, u32)], mask: &mut Mask) -> u32 {
+    let mut drawn = 0;
+    for &(packet, lanes) in batch {
+        drawn += pipeline.rasterize_viewed::<true>(table, viewer, packet, lanes, mask);
+    }
+    drawn
 }
 
 /// `super::packet_codes` in AVX2 registers.
 #[inline]
 #[target_feature(enable = "avx2")]
 pub unsafe fn packet_codes(table: &PlaneTable, viewer: &Viewer, packet: &Packet, lanes: u32, codes: &mut [[u32; LANES]; 3]) -> (u32, u32) {
+    packet_codes_inlined(table, viewer, packet, lanes, codes)
+}
+
+/// `packet_codes` for kernels compiled for AVX2, into which it inlines (no closures: those
+/// would be compiled without AVX2 and keep the intrinsics as calls).
+#[inline(always)]
+pub(super) unsafe fn packet_codes_inlined(table: &PlaneTable, viewer: &Viewer, packet: &Packet, lanes: u32, codes: &mut [[u32; LANES]; 3]) -> (u32, u32) {
     let Viewer { origin, frame, exclude } = *viewer;
-    let (o, t, b, n) = (splat(origin), splat(frame.t), splat(frame.b), splat(frame.n));
-    let corner = |k: usize| -> V3 {
-        let d: V3 = std::array::from_fn(|j| _mm256_sub_ps(_mm256_loadu_ps(packet.corners[k][j].as_ptr()), o[j]));
-        [dot(d, t), dot(d, b), dot(d, n)]
-    };
-    let (pa, pb, pc) = (corner(0), corner(1), corner(2));
+    let (o, axes) = (splat(origin), [splat(frame.t), splat(frame.b), splat(frame.n)]);
+    let (pa, pb, pc) = (local_corner(packet, 0, o, axes), local_corner(packet, 1, o, axes), local_corner(packet, 2, o, axes));
     let zero = _mm256_setzero_ps();
     let above = _mm256_or_ps(
         _mm256_or_ps(_mm256_cmp_ps::<_CMP_GT_OQ>(pa[2], zero), _mm256_cmp_ps::<_CMP_GT_OQ>(pb[2], zero)),
@@ -51,8 +84,8 @@ pub unsafe fn packet_codes(table: &PlaneTable, viewer: &Viewer, packet: &Packet,
     );
     let above = _mm256_andnot_ps(below_low_band([pa, pb, pc]), above);
     let ex = _mm256_set1_epi32(exclude as i32);
-    let id = |k: usize| _mm256_cmpeq_epi32(_mm256_loadu_si256(packet.ids[k].as_ptr() as *const __m256i), ex);
-    let own = _mm256_castsi256_ps(_mm256_or_si256(_mm256_or_si256(id(0), id(1)), id(2)));
+    let own = _mm256_or_si256(_mm256_or_si256(is_vertex(packet, 0, ex), is_vertex(packet, 1, ex)), is_vertex(packet, 2, ex));
+    let own = _mm256_castsi256_ps(own);
     let keep = _mm256_movemask_ps(_mm256_andnot_ps(own, above)) as u32 & lanes;
     if keep == 0 {
         return (0, 0);
@@ -63,7 +96,11 @@ pub unsafe fn packet_codes(table: &PlaneTable, viewer: &Viewer, packet: &Packet,
 /// `super::below_low_band` of every lane, as a lane mask.
 #[inline(always)]
 unsafe fn below_low_band([pa, pb, pc]: [V3; 3]) -> __m256 {
-    let s: V3 = std::array::from_fn(|j| _mm256_add_ps(_mm256_add_ps(pa[j], pb[j]), pc[j]));
+    let s: V3 = [
+        _mm256_add_ps(_mm256_add_ps(pa[0], pb[0]), pc[0]),
+        _mm256_add_ps(_mm256_add_ps(pa[1], pb[1]), pc[1]),
+        _mm256_add_ps(_mm256_add_ps(pa[2], pb[2]), pc[2]),
+    ];
     let near = _mm256_min_ps(_mm256_min_ps(dot(pa, s), dot(pb, s)), dot(pc, s));
     let top = _mm256_max_ps(_mm256_max_ps(pa[2], pb[2]), pc[2]);
     let height = _mm256_mul_ps(_mm256_mul_ps(top, top), dot(s, s));
@@ -91,9 +128,9 @@ unsafe fn solid_codes(table: &PlaneTable, [pa, pb, pc]: [V3; 3], codes: &mut [[u
     // Orient the edge planes so that the opposite vertex is on their positive side: a sign
     // flip is the portable path's multiply by -1.
     let flip = _mm256_and_ps(_mm256_cmp_ps::<_CMP_LT_OQ>(det, _mm256_setzero_ps()), _mm256_set1_ps(-0.0));
-    for (e, plane) in [ab, bc, ca].into_iter().enumerate() {
-        let [x, y, z] = plane.map(|c| _mm256_xor_ps(c, flip));
-        _mm256_storeu_si256(codes[e].as_mut_ptr() as *mut __m256i, table.codes_avx2(x, y, z));
+    for (e, [x, y, z]) in [ab, bc, ca].into_iter().enumerate() {
+        let code = table.codes_avx2_inlined(_mm256_xor_ps(x, flip), _mm256_xor_ps(y, flip), _mm256_xor_ps(z, flip));
+        _mm256_storeu_si256(codes[e].as_mut_ptr() as *mut __m256i, code);
     }
     _mm256_movemask_ps(solid) as u32
 }
