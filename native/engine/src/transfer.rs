@@ -9,7 +9,7 @@ use crate::mesh::{mean_edge_length, normalize, tangent_frame, weld, welded_norma
 use crate::plane_table::{PlaneTable, DEFAULT_RESOLUTION};
 use crate::progress::{par_rows, Progress};
 use crate::packets::PacketLists;
-use crate::rasterizer::{dot, triangle_mask, Pipeline};
+use crate::rasterizer::{dot, triangle_mask, Pipeline, Viewer};
 use crate::sh::ShBasis;
 
 /// Where glossy receivers are seen from.
@@ -263,12 +263,12 @@ impl Scene<'_> {
     fn visibility(&self, r: u32, receiver: &Receiver) -> Mask {
         let mut mask = Mask::EMPTY;
         let mut pipeline = Pipeline::default();
+        let viewer = Viewer { origin: receiver.origin, frame: &receiver.frame, exclude: r };
+        let mut batch = Vec::with_capacity(8);
         for chunk in self.packets.packets.chunks(8) {
-            for packet in chunk {
-                if !receiver.clearly_below_horizon(&packet.bounds) {
-                    pipeline.rasterize_packet(self.table, receiver.origin, &receiver.frame, packet, u32::MAX, r, &mut mask);
-                }
-            }
+            batch.clear();
+            batch.extend(chunk.iter().filter(|p| !receiver.clearly_below_horizon(&p.bounds)).map(|p| (p, u32::MAX)));
+            pipeline.rasterize_batch(self.table, &viewer, &batch, &mut mask);
             if mask == self.disk {
                 return mask; // fully occluded: nothing more can change
             }
