@@ -88,8 +88,8 @@ impl PlaneTable {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::packets::LANES;
     use crate::disk_mask::disk;
+    use crate::packets::LANES;
     use crate::test_random::xorshift32 as next;
 
     #[test]
