@@ -334,25 +334,14 @@ impl PlaneTable {
 
     /// `codes` for eight normals in AVX2 registers: the same operations in the same order,
     /// so the same codes bit for bit (`max`/`min` with the bound second are the portable
-    /// clamps, NaN included).
+    /// clamps, NaN included). For kernels compiled for AVX2, into which it inlines (no
+    /// closures: those would be compiled without AVX2 and keep the intrinsics as calls).
     ///
     /// # Safety
     /// The CPU must support AVX2 (`is_x86_feature_detected!("avx2")`).
     #[cfg(target_arch = "x86_64")]
-    #[inline]
-    #[target_feature(enable = "avx2")]
-    pub unsafe fn codes_avx2(&self, x: __m256, y: __m256, z: __m256) -> __m256i {
-        self.codes_avx2_inlined(x, y, z)
-    }
-
-    /// `codes_avx2` for kernels compiled for AVX2, into which it inlines (no closures: those
-    /// would be compiled without AVX2 and keep the intrinsics as calls).
-    ///
-    /// # Safety
-    /// The CPU must support AVX2.
-    #[cfg(target_arch = "x86_64")]
     #[inline(always)]
-    pub unsafe fn codes_avx2_inlined(&self, x: __m256, y: __m256, z: __m256) -> __m256i {
+    pub unsafe fn codes_avx2(&self, x: __m256, y: __m256, z: __m256) -> __m256i {
         let sign = _mm256_set1_ps(-0.0);
         let (ax, ay, az) = (_mm256_andnot_ps(sign, x), _mm256_andnot_ps(sign, y), _mm256_andnot_ps(sign, z));
         let x_major = _mm256_and_ps(_mm256_cmp_ps::<_CMP_GE_OQ>(ax, ay), _mm256_cmp_ps::<_CMP_GE_OQ>(ax, az));
@@ -400,17 +389,8 @@ impl PlaneTable {
     /// of its use.
     #[inline(always)]
     pub fn prefetch_code(&self, code: u32) {
-        #[cfg(target_arch = "x86_64")]
-        {
-            use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
-            // No bounds check: the address is only a hint (a code's fetch checks it).
-            let p = self.masks.as_ptr().wrapping_add((code & !COMPLEMENT) as usize) as *const i8;
-            // SAFETY: prefetching is a hint and never faults, whatever the address.
-            unsafe {
-                _mm_prefetch(p, _MM_HINT_T0);
-                _mm_prefetch(p.wrapping_add(64), _MM_HINT_T0);
-            }
-        }
+        // No bounds check: the address is only a hint (a code's fetch checks it).
+        self.prefetch_bytes((code & !COMPLEMENT) as usize * MASK_BYTES);
     }
 
     /// Where the masks of `codes` lie (`Fetches`), lane by lane; written so that it vectorises.
@@ -435,16 +415,16 @@ impl PlaneTable {
         while bits != 0 {
             let i = bits.trailing_zeros() as usize;
             bits &= bits - 1;
-            (0..3).for_each(|e| self.prefetch_bytes(fetches.offsets[e][i]));
+            (0..3).for_each(|e| self.prefetch_bytes(fetches.offsets[e][i] as usize));
         }
     }
 
     #[inline(always)]
-    fn prefetch_bytes(&self, offset: u32) {
+    fn prefetch_bytes(&self, offset: usize) {
         #[cfg(target_arch = "x86_64")]
         {
             use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
-            let p = (self.masks.as_ptr() as *const i8).wrapping_add(offset as usize);
+            let p = (self.masks.as_ptr() as *const i8).wrapping_add(offset);
             // SAFETY: prefetching is a hint and never faults, whatever the address.
             unsafe {
                 _mm_prefetch(p, _MM_HINT_T0);
@@ -474,8 +454,13 @@ impl PlaneTable {
     /// The mask of a code (`code`): `mask_at` of its texel.
     #[inline(always)]
     pub fn mask_of_code(&self, code: u32) -> Mask {
-        let stored = self.stored(code);
-        let flip = &self.flips[(code >> COMPLEMENT.trailing_zeros()) as usize];
+        self.flipped(self.stored(code), (code >> COMPLEMENT.trailing_zeros()) as usize)
+    }
+
+    /// A stored mask XOR-ed with flip `flip` (0: nothing, 1: the disk).
+    #[inline(always)]
+    fn flipped(&self, stored: &Mask, flip: usize) -> Mask {
+        let flip = &self.flips[flip];
         Mask(std::array::from_fn(|w| stored.0[w] ^ flip.0[w]))
     }
 }

@@ -32,11 +32,7 @@ impl PlaneTable {
         while bits != 0 {
             let i = bits.trailing_zeros() as usize;
             bits &= bits - 1;
-            let edge = |e: usize| {
-                let stored = &self.masks[fetches.offsets[e][i] as usize / MASK_BYTES];
-                let flip = &self.flips[(fetches.flips[e][i] & 1) as usize];
-                Mask(std::array::from_fn(|w| stored.0[w] ^ flip.0[w]))
-            };
+            let edge = |e: usize| self.flipped(&self.masks[fetches.offsets[e][i] as usize / MASK_BYTES], (fetches.flips[e][i] & 1) as usize);
             mask.or_assign(&Mask::and3(&edge(0), &edge(1), &edge(2)));
         }
     }

@@ -129,7 +129,7 @@ unsafe fn solid_codes(table: &PlaneTable, [pa, pb, pc]: [V3; 3], codes: &mut [[u
     // flip is the portable path's multiply by -1.
     let flip = _mm256_and_ps(_mm256_cmp_ps::<_CMP_LT_OQ>(det, _mm256_setzero_ps()), _mm256_set1_ps(-0.0));
     for (e, [x, y, z]) in [ab, bc, ca].into_iter().enumerate() {
-        let code = table.codes_avx2_inlined(_mm256_xor_ps(x, flip), _mm256_xor_ps(y, flip), _mm256_xor_ps(z, flip));
+        let code = table.codes_avx2(_mm256_xor_ps(x, flip), _mm256_xor_ps(y, flip), _mm256_xor_ps(z, flip));
         _mm256_storeu_si256(codes[e].as_mut_ptr() as *mut __m256i, code);
     }
     _mm256_movemask_ps(solid) as u32
