@@ -96,6 +96,9 @@ pub struct Solver {
     /// pose, so that a thread's consecutive receivers read the same clusters from cache
     /// (Blender's subdivided meshes number vertices far apart from their neighbours).
     receiver_order: Vec<u32>,
+    /// Per input vertex, the row of its welded receiver in that order: the output is copied
+    /// from the computed rows in one pass.
+    output_rows: Vec<u32>,
     blockers: Blockers,
     brdf: Brdf,
     offset: f32,
@@ -146,6 +149,7 @@ impl Solver {
         let fine_packets = PacketLists::new(hierarchy.cluster_compact.iter().map(|c| &c.welded[..]));
         let group_tree = GroupTree::build(&layout, &hierarchy);
         let receiver_order = morton_permutation(&layout);
+        let output_rows = output_rows(&receiver_order, &mesh.remap);
         Ok(Solver {
             remap: mesh.remap,
             first_copy,
@@ -156,6 +160,7 @@ impl Solver {
             fine_packets,
             group_tree,
             receiver_order,
+            output_rows,
             blockers,
             brdf: settings.brdf,
             offset,
@@ -196,7 +201,7 @@ impl Solver {
                 + l.transfer.len() * 4
                 + l.casters.as_ref().map_or(0, CasterCache::bytes)
         }) + self.spare_masks.capacity() * size_of::<Kept>();
-        (self.remap.len() + self.first_copy.len() + self.receiver_order.len()) * 4
+        (self.remap.len() + self.first_copy.len() + self.receiver_order.len() + self.output_rows.len()) * 4
             + self.fine.len() * 12
             + h.coarse.len() * 12
             + (h.owned_start.len() + h.owned.len() + h.near_start.len() + h.near.len()) * 4
@@ -274,10 +279,6 @@ impl Solver {
             self.spare_masks = masks;
             return Err(error);
         }
-        let mut welded = vec![0.0f32; ordered.len()];
-        for (row, &r) in ordered.chunks_exact(k).zip(&self.receiver_order) {
-            welded[r as usize * k..(r as usize + 1) * k].copy_from_slice(row);
-        }
         let reused = reused.into_inner() as usize;
         let computed = frame.positions.len() - reused;
         self.stats = Stats {
@@ -286,8 +287,15 @@ impl Solver {
             reused,
             used_pvs: frame.use_pvs,
         };
-        let result = self.remap.iter().flat_map(|&w| welded[w as usize * k..(w as usize + 1) * k].iter().copied()).collect();
+        let mut result = Vec::with_capacity(self.output_rows.len() * k);
+        for &row in &self.output_rows {
+            result.extend_from_slice(&ordered[row as usize * k..(row as usize + 1) * k]);
+        }
         if self.blockers.reuse {
+            let mut welded = vec![0.0f32; ordered.len()];
+            for (row, &r) in ordered.chunks_exact(k).zip(&self.receiver_order) {
+                welded[r as usize * k..(r as usize + 1) * k].copy_from_slice(row);
+            }
             let last_masks = self.last.as_mut().and_then(|l| l.casters.as_mut()).map(|c| std::mem::take(&mut c.masks));
             self.spare_masks = last_masks.unwrap_or_default();
             let casters = casters.zip(plan).map(|(c, p)| p.into_cache(c, masks));
@@ -746,6 +754,15 @@ fn snapped(positions: &[Vec3], triangles: &[[u32; 3]]) -> Vec<Vec3> {
     triangles.iter().flatten().for_each(|&v| used[v as usize] = true);
     let snap = |p: &Vec3| p.map(|c| (c * 1024.0).round() / 1024.0);
     positions.iter().zip(used).map(|(p, used)| if used { snap(p) } else { [0.0; 3] }).collect()
+}
+
+/// Per input vertex (welded as `remap` says), the position of its welded vertex in `order`.
+fn output_rows(order: &[u32], remap: &[u32]) -> Vec<u32> {
+    let mut row_of = vec![0u32; order.len()];
+    for (row, &w) in order.iter().enumerate() {
+        row_of[w as usize] = row as u32;
+    }
+    remap.iter().map(|&w| row_of[w as usize]).collect()
 }
 
 /// A walk's turn at a node of the group tree (`Solver::turn`): a leaf's group, a node drawn
