@@ -119,8 +119,8 @@ struct Frame {
     views: Option<Vec<Vec3>>,
     /// Bounding boxes of clusters.
     bounds: Vec<[Vec3; 2]>,
-    /// Per cluster, the centre of its box and (near_scale x half its diagonal)^2.
-    spheres: Vec<[f32; 4]>,
+    /// Per group, its clusters' near spheres (`NearSpheres`).
+    spheres: Vec<NearSpheres>,
     group_bounds: Vec<[Vec3; 2]>,
     /// Per node of the group tree, its box.
     node_bounds: Vec<[Vec3; 2]>,
@@ -436,7 +436,7 @@ impl Solver {
             return (1 << clusters) - 1;
         }
         let near = self.hierarchy.near_of(r);
-        bits_of(near, first, clusters) | close_clusters(receiver, &frame.spheres[first..first + clusters])
+        bits_of(near, first, clusters) | frame.spheres[first / GROUP].around(receiver.origin)
     }
 
     /// Per cluster, the bounding box of its coarse triangle and the fine triangles it owns in
@@ -451,16 +451,14 @@ impl Solver {
             .collect()
     }
 
-    fn near_spheres(&self, bounds: &[[Vec3; 2]]) -> Vec<[f32; 4]> {
-        bounds
-            .iter()
-            .map(|[lo, hi]| {
-                let centre = [0, 1, 2].map(|a| 0.5 * (lo[a] + hi[a]));
-                let half_diagonal2 = [0, 1, 2].map(|a| 0.5 * (hi[a] - lo[a])).iter().map(|d| d * d).sum::<f32>();
-                let r2 = if half_diagonal2.is_finite() { half_diagonal2 * self.blockers.near_scale.powi(2) } else { -1.0 };
-                [centre[0], centre[1], centre[2], r2]
-            })
-            .collect()
+    fn near_spheres(&self, bounds: &[[Vec3; 2]]) -> Vec<NearSpheres> {
+        let sphere = |[lo, hi]: &[Vec3; 2]| {
+            let centre = [0, 1, 2].map(|a| 0.5 * (lo[a] + hi[a]));
+            let half_diagonal2 = [0, 1, 2].map(|a| 0.5 * (hi[a] - lo[a])).iter().map(|d| d * d).sum::<f32>();
+            let r2 = if half_diagonal2.is_finite() { half_diagonal2 * self.blockers.near_scale.powi(2) } else { -1.0 };
+            [centre[0], centre[1], centre[2], r2]
+        };
+        bounds.chunks(GROUP).map(|group| NearSpheres::new(group.iter().map(sphere))).collect()
     }
 
     /// Per group, the box around its clusters' boxes and its coarse triangles.
@@ -784,13 +782,35 @@ fn bits_of(list: &[u32], first: usize, count: usize) -> u32 {
     list[start..].iter().take_while(|&&c| (c as usize) < first + count).fold(0, |bits, &c| bits | 1 << (c as usize - first))
 }
 
-/// Bit i set when cluster i's near sphere contains the receiver.
-#[inline(always)]
-fn close_clusters(receiver: &Receiver, spheres: &[[f32; 4]]) -> u32 {
-    let o = receiver.origin;
-    spheres.iter().enumerate().fold(0, |bits, (i, s)| {
-        let d = [s[0] - o[0], s[1] - o[1], s[2] - o[2]];
-        bits | ((d[0] * d[0] + d[1] * d[1] + d[2] * d[2] < s[3]) as u32) << i
-    })
+/// A group's near spheres, one per cluster, each the centre of the cluster's box and
+/// (near_scale x half its diagonal)^2, in structure-of-arrays form: the test of a receiver
+/// against all sixteen compiles to a few vector instructions, where an array of spheres was
+/// tested one sphere at a time. Lanes past the group's clusters never contain a receiver.
+#[derive(Clone, Copy)]
+struct NearSpheres {
+    centres: [[f32; GROUP]; 3],
+    radii2: [f32; GROUP],
+}
+
+impl NearSpheres {
+    fn new(spheres: impl Iterator<Item = [f32; 4]>) -> Self {
+        let mut out = NearSpheres { centres: [[0.0; GROUP]; 3], radii2: [-1.0; GROUP] };
+        for (i, s) in spheres.enumerate() {
+            (0..3).for_each(|a| out.centres[a][i] = s[a]);
+            out.radii2[i] = s[3];
+        }
+        out
+    }
+
+    /// Bit i set when cluster i's near sphere contains `origin`.
+    #[inline(always)]
+    fn around(&self, origin: Vec3) -> u32 {
+        let mut inside = [false; GROUP];
+        for (i, inside) in inside.iter_mut().enumerate() {
+            let d = [0, 1, 2].map(|a| self.centres[a][i] - origin[a]);
+            *inside = d[0] * d[0] + d[1] * d[1] + d[2] * d[2] < self.radii2[i];
+        }
+        inside.iter().rev().fold(0, |bits, &b| bits << 1 | b as u32)
+    }
 }
 
