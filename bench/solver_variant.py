@@ -8,6 +8,15 @@ of docs/solver_speed.md's tries):
     .venv/bin/python bench/solver_variant.py --level 3 --pvs         # and with build_pvs, side by side
     .venv/bin/python bench/solver_variant.py --mesh fox --pvs        # bench/run.py's other meshes
 
+Two builds of the engine compare the same way, run after run: an older one unpacked where
+PYTHONPATH puts it ahead of the installed one (the first line printed names the engine used):
+
+    repo=$PWD; git worktree add /tmp/old <rev>
+    (cd /tmp/old/native && $repo/.venv/bin/maturin build --release -o /tmp/wheel)
+    .venv/bin/python -m zipfile -e /tmp/wheel/hemishadow-*.whl /tmp/old_engine
+    PYTHONPATH=/tmp/old_engine .venv/bin/python bench/solver_variant.py --mesh cloth
+    .venv/bin/python bench/solver_variant.py --mesh cloth
+
 The frames (`run.make_mesh`, 7 of them, frame 0 the rest pose), normals, offset, the 500
 receivers and their reference (128^2 rays, frames 2 and 5, on all cores) are bench/run.py's;
 they are cached in out/solver_variant/ (the reference takes a minute). Prints the median time
@@ -114,6 +123,7 @@ def main():
     parser.add_argument("--rounds", type=int, default=3, help="passes over the moving frames timed")
     parser.add_argument("--pvs", action="store_true", help="also the setting with build_pvs(every frame), side by side")
     args = parser.parse_args()
+    print(f"engine: {pathlib.Path(hemishadow.__file__).parent}")
     data = prepared(args.mesh or f"suzanne_{args.level}")
     frames, normals = data["frames"], data["normals"]
     keywords = dict(args.set)
