@@ -173,9 +173,12 @@ fn lane_bits(lanes: &[bool; LANES]) -> u32 {
 /// (docs/solver_speed.md).
 #[derive(Default)]
 pub struct Pipeline {
-    /// Where the masks of the previous packet's edge codes lie, and its kept lanes:
-    /// prefetched, not yet OR-ed.
-    pending: Fetches,
+    /// Where the masks of the packets' edge codes lie: the previous packet's, prefetched and
+    /// not yet OR-ed, in `fetches[pending]`; the next packet's are written into the other,
+    /// so that neither is copied.
+    fetches: [Fetches; 2],
+    pending: usize,
+    /// The previous packet's kept lanes.
     pending_lanes: u32,
     /// Every mask drawn so far, OR-ed at once rather than a packet late (`census`).
     #[cfg(feature = "census")]
@@ -190,8 +193,9 @@ impl Pipeline {
     /// With `AVX2`, the CPU must support AVX2.
     #[inline(always)]
     unsafe fn advance<const AVX2: bool>(&mut self, table: &PlaneTable, codes: &[[u32; LANES]; 3], lanes: u32, mask: &mut Mask) {
-        let next = table.fetches(codes);
-        table.prefetch(&next, lanes);
+        let next = 1 - self.pending;
+        self.fetches[next] = table.fetches(codes);
+        table.prefetch(&self.fetches[next], lanes);
         self.drain_pending::<AVX2>(table, mask);
         self.pending = next;
         self.pending_lanes = lanes;
@@ -212,11 +216,11 @@ impl Pipeline {
     unsafe fn drain_pending<const AVX2: bool>(&mut self, table: &PlaneTable, mask: &mut Mask) {
         #[cfg(target_arch = "x86_64")]
         if AVX2 {
-            table.or_triangles_avx2_inlined(&self.pending, self.pending_lanes, mask);
+            table.or_triangles_avx2_inlined(&self.fetches[self.pending], self.pending_lanes, mask);
             self.pending_lanes = 0;
             return;
         }
-        table.or_triangles(&self.pending, self.pending_lanes, mask);
+        table.or_triangles(&self.fetches[self.pending], self.pending_lanes, mask);
         self.pending_lanes = 0;
     }
 
