@@ -282,7 +282,6 @@ impl Quadrature {
         local.copy_from_slice(&padded_local.as_flattened()[..local.len()]);
     }
 
-
     fn integrate_phong(&self, blocked: &Mask, frame: &Frame, exponent: f32, view: [f32; 3], out: &mut [f32]) {
         let k = self.basis.coeffs();
         let out = &mut out[..k];
