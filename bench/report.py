@@ -199,9 +199,10 @@ def header(results):
         "the mean over receivers with AO >= 0.1 (tables).",
         "- **hemishadow**: `TransferSolver(rest pose, tris, offset=..., reuse=False, **variant)`, built once, one "
         "warm-up `solve`, then `solve(vertices, normals)` timed per moving frame, in passes over the frames "
-        "while the budget lasts (1.5 s of solves per variant, at most 20 passes: one pass on the slow meshes, "
-        "many on the fast ones, whose median of seven solves caught the host's busy spells); the median over "
-        "the solves timed (column 'solves timed'). No Blender I/O. Variants: the default (no keywords), `downsample` 1 / 2 / 4, "
+        f"while the budget lasts ({cfg['hemishadow_budget']:g} s of solves per variant, at most "
+        f"{cfg.get('max_passes', 1)} passes: one pass on the slow meshes, many on the fast ones, whose median of "
+        "seven solves caught the host's busy spells); the median over the solves timed (column 'solves timed'). "
+        "No Blender I/O. Variants: the default (no keywords), `downsample` 1 / 2 / 4, "
         "`table_resolution` 64 / 96 / 128, `ring` 1 / 2 (a variant whose keywords equal the declared defaults is "
         "the default and is not run twice; 'output = default' marks a variant whose transfer was bit-identical "
         "to the default's), and **PVS**: the default after `solver.build_pvs(all frames of the mesh)` (the timed "

@@ -828,7 +828,6 @@ fn bits16(flags: &[bool; 16]) -> u32 {
     flags.iter().rev().fold(0, |bits, &b| bits << 1 | b as u32)
 }
 
-
 #[cfg(test)]
 mod tests {
     use super::*;
