@@ -340,6 +340,15 @@ fn local_corners(origin: [f32; 3], frame: &Frame, packet: &Packet) -> LocalCorne
     local
 }
 
+/// Where the solver's packets come from: a group tree node's proxy, a group's coarse
+/// triangles, a cluster's fine triangles (the census counts packets by it).
+#[derive(Clone, Copy)]
+pub enum Source {
+    Proxy,
+    Coarse,
+    Fine,
+}
+
 /// What the solver's triangles add to their receivers' masks (feature `census`, for profiling
 /// only: it draws every mask twice). Counts by outcome (no cell, only cells already blocked,
 /// new cells) and by the height of the highest corner's direction above the horizon
@@ -348,22 +357,13 @@ fn local_corners(origin: [f32; 3], frame: &Frame, packet: &Packet) -> LocalCorne
 pub mod census {
     use std::sync::atomic::{AtomicU64, Ordering};
 
-    use super::{LocalCorners, Mask, PlaneTable, LANES};
+    use super::{LocalCorners, Mask, PlaneTable, Source, LANES};
 
     static COUNTS: [[AtomicU64; 3]; 3] = [const { [const { AtomicU64::new(0) }; 3] }; 3];
 
     /// `[outcome][height]` counts since the start (outcome: empty, hidden, adding).
     pub fn counts() -> [[u64; 3]; 3] {
         std::array::from_fn(|o| std::array::from_fn(|h| COUNTS[o][h].load(Ordering::Relaxed)))
-    }
-
-    /// Where the solver's packets come from: a group tree node's proxy, a group's coarse
-    /// triangles, a cluster's fine triangles (set by the solver before it hands them over).
-    #[derive(Clone, Copy)]
-    pub enum Source {
-        Proxy,
-        Coarse,
-        Fine,
     }
 
     pub const SOURCES: [&str; 3] = ["proxies", "coarse", "fine"];
