@@ -119,8 +119,8 @@ struct Frame {
     views: Option<Vec<Vec3>>,
     /// Bounding boxes of clusters.
     bounds: Vec<[Vec3; 2]>,
-    /// Per group, its clusters' near spheres (`NearSpheres`).
-    spheres: Vec<NearSpheres>,
+    /// Per group, its clusters' spheres (`ClusterSpheres`).
+    spheres: Vec<ClusterSpheres>,
     group_bounds: Vec<[Vec3; 2]>,
     /// Per node of the group tree, its box.
     node_bounds: Vec<[Vec3; 2]>,
@@ -324,7 +324,7 @@ impl Solver {
         let bounds = self.cluster_bounds(&positions);
         let group_bounds = self.group_bounds(&positions, &bounds);
         let node_bounds = self.group_tree.bounds(&group_bounds);
-        let spheres = self.near_spheres(&bounds);
+        let spheres = self.cluster_spheres(&bounds);
         let use_pvs = self.pvs.as_ref().is_some_and(|pvs| pvs.covers(&positions));
         Ok(Frame { positions, normals, views, bounds, spheres, group_bounds, node_bounds, use_pvs })
     }
@@ -451,14 +451,8 @@ impl Solver {
             .collect()
     }
 
-    fn near_spheres(&self, bounds: &[[Vec3; 2]]) -> Vec<NearSpheres> {
-        let sphere = |[lo, hi]: &[Vec3; 2]| {
-            let centre = [0, 1, 2].map(|a| 0.5 * (lo[a] + hi[a]));
-            let half_diagonal2 = [0, 1, 2].map(|a| 0.5 * (hi[a] - lo[a])).iter().map(|d| d * d).sum::<f32>();
-            let r2 = if half_diagonal2.is_finite() { half_diagonal2 * self.blockers.near_scale.powi(2) } else { -1.0 };
-            [centre[0], centre[1], centre[2], r2]
-        };
-        bounds.chunks(GROUP).map(|group| NearSpheres::new(group.iter().map(sphere))).collect()
+    fn cluster_spheres(&self, bounds: &[[Vec3; 2]]) -> Vec<ClusterSpheres> {
+        bounds.chunks(GROUP).map(|group| ClusterSpheres::new(group, self.blockers.near_scale)).collect()
     }
 
     /// Per group, the box around its clusters' boxes and its coarse triangles.
@@ -693,12 +687,17 @@ impl Solver {
             return;
         }
         let expanded = self.expanded_clusters(r, receiver, frame, first, clusters);
+        // Clusters wholly below the horizon are dropped before their packets are handed over.
+        let above = !frame.spheres[g].clearly_below(receiver.origin, receiver.frame.n);
         if self.blockers.hierarchy {
-            let far = !expanded & seen;
-            drawing.packets.extend(self.coarse_packets.of(g).iter().enumerate().map(|(p, packet)| (packet, far >> (p * LANES))));
+            let far = !expanded & seen & above;
+            for (p, packet) in self.coarse_packets.of(g).iter().enumerate() {
+                let lanes = far >> (p * LANES) & packet.lanes;
+                push_if(&mut drawing.packets, (packet, lanes), lanes != 0);
+            }
             drawing.end_source(table, Source::Coarse);
         }
-        let mut bits = expanded & seen;
+        let mut bits = expanded & seen & above;
         while bits != 0 {
             let c = first + bits.trailing_zeros() as usize;
             bits &= bits - 1;
@@ -804,24 +803,46 @@ fn bits_of(list: &[u32], first: usize, count: usize) -> u32 {
     list[start..].iter().take_while(|&&c| (c as usize) < first + count).fold(0, |bits, &c| bits | 1 << (c as usize - first))
 }
 
-/// A group's near spheres, one per cluster, each the centre of the cluster's box and
-/// (near_scale x half its diagonal)^2, in structure-of-arrays form: the test of a receiver
-/// against all sixteen compiles to a few vector instructions, where an array of spheres was
-/// tested one sphere at a time. Lanes past the group's clusters never contain a receiver.
+/// A group's clusters as spheres around their boxes (centre, half the diagonal), in
+/// structure-of-arrays form: a receiver is tested against all sixteen in a few vector
+/// instructions, where an array of spheres was tested one sphere at a time. Lanes past the
+/// group's clusters never contain a receiver and never lie below a horizon.
 #[derive(Clone, Copy)]
-struct NearSpheres {
+struct ClusterSpheres {
     centres: [[f32; GROUP]; 3],
-    radii2: [f32; GROUP],
+    /// (near_scale x the radius)^2: the near test's (`around`).
+    near2: [f32; GROUP],
+    /// The radius, rounded up.
+    radii: [f32; GROUP],
 }
 
-impl NearSpheres {
-    fn new(spheres: impl Iterator<Item = [f32; 4]>) -> Self {
-        let mut out = NearSpheres { centres: [[0.0; GROUP]; 3], radii2: [-1.0; GROUP] };
-        for (i, s) in spheres.enumerate() {
-            (0..3).for_each(|a| out.centres[a][i] = s[a]);
-            out.radii2[i] = s[3];
+impl ClusterSpheres {
+    /// The spheres around `boxes` (at most `GROUP`).
+    fn new(boxes: &[[Vec3; 2]], near_scale: f32) -> Self {
+        let mut out = ClusterSpheres { centres: [[0.0; GROUP]; 3], near2: [-1.0; GROUP], radii: [f32::INFINITY; GROUP] };
+        for (i, [lo, hi]) in boxes.iter().enumerate() {
+            (0..3).for_each(|a| out.centres[a][i] = 0.5 * (lo[a] + hi[a]));
+            let half_diagonal2 = [0, 1, 2].map(|a| 0.5 * (hi[a] - lo[a])).iter().map(|d| d * d).sum::<f32>();
+            if half_diagonal2.is_finite() {
+                out.near2[i] = half_diagonal2 * near_scale.powi(2);
+                out.radii[i] = half_diagonal2.sqrt() * 1.0001;
+            }
         }
         out
+    }
+
+    /// Bit i set when cluster i lies below the horizon of a receiver at `origin` with normal
+    /// `n` by a margin far above rounding: every corner of its coarse and fine triangles then
+    /// has a negative height in the receiver's frame, so the rasterizer would draw none of
+    /// them (`Receiver::clearly_below_horizon`, with the sphere).
+    #[inline(always)]
+    fn clearly_below(&self, origin: Vec3, n: Vec3) -> u32 {
+        let mut below = [false; GROUP];
+        for (i, below) in below.iter_mut().enumerate() {
+            let d = [0, 1, 2].map(|a| self.centres[a][i] - origin[a]);
+            *below = d[0] * n[0] + d[1] * n[1] + d[2] * n[2] + self.radii[i] < -1e-5;
+        }
+        bits16(&below)
     }
 
     /// Bit i set when cluster i's near sphere contains `origin`.
@@ -830,7 +851,7 @@ impl NearSpheres {
         let mut inside = [false; GROUP];
         for (i, inside) in inside.iter_mut().enumerate() {
             let d = [0, 1, 2].map(|a| self.centres[a][i] - origin[a]);
-            *inside = d[0] * d[0] + d[1] * d[1] + d[2] * d[2] < self.radii2[i];
+            *inside = d[0] * d[0] + d[1] * d[1] + d[2] * d[2] < self.near2[i];
         }
         bits16(&inside)
     }
@@ -882,12 +903,26 @@ mod tests {
     }
 
     #[test]
-    fn near_spheres_hold_the_receivers_within_their_radius_only() {
-        let spheres = NearSpheres::new([[0.0, 0.0, 0.0, 1.0], [5.0, 0.0, 0.0, 4.0], [f32::NAN, 0.0, 0.0, 1.0]].into_iter());
+    fn cluster_spheres_hold_the_receivers_within_their_near_radius_only() {
+        let boxes = [[[-1.0, 0.0, 0.0], [1.0, 0.0, 0.0]], [[3.0, 0.0, 0.0], [7.0, 0.0, 0.0]], [[f32::NAN, 0.0, 0.0], [1.0, 0.0, 0.0]]];
+        let spheres = ClusterSpheres::new(&boxes, 1.0);
         assert_eq!(spheres.around([0.5, 0.0, 0.0]), 0b001);
         assert_eq!(spheres.around([4.0, 0.0, 0.0]), 0b010);
         assert_eq!(spheres.around([100.0, 0.0, 0.0]), 0);
         // The lanes past the three clusters are centred at the origin and still hold nothing.
         assert_eq!(spheres.around([0.0; 3]), 0b001);
+        assert_eq!(ClusterSpheres::new(&boxes, 2.0).around([-1.5, 0.0, 0.0]), 0b001);
+    }
+
+    #[test]
+    fn clusters_lie_clearly_below_only_with_their_whole_sphere() {
+        let boxes = [[[-1.0, -1.0, -3.0], [1.0, 1.0, -1.0]], [[-1.0, -1.0, -1.0], [1.0, 1.0, 1.0]], [[0.0, 0.0, f32::NAN], [1.0, 1.0, -5.0]]];
+        let spheres = ClusterSpheres::new(&boxes, 2.5);
+        // Seen from above the first box (radius sqrt(3), centre 2 below): below only while the
+        // whole sphere is, not just the box.
+        assert_eq!(spheres.clearly_below([0.0, 0.0, 0.0], [0.0, 0.0, 1.0]), 0b001);
+        assert_eq!(spheres.clearly_below([0.0, 0.0, -0.5], [0.0, 0.0, 1.0]), 0);
+        assert_eq!(spheres.clearly_below([0.0, 0.0, 10.0], [0.0, 0.0, 1.0]), 0b011);
+        assert_eq!(spheres.clearly_below([0.0, 0.0, 10.0], [0.0, 0.0, -1.0]), 0);
     }
 }
