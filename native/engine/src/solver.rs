@@ -255,7 +255,7 @@ impl Solver {
         let k = self.coeffs();
         let mut ordered = vec![0.0f32; frame.positions.len() * k];
         let (blockers, reused) = (AtomicU64::new(0), AtomicU64::new(0));
-        let solved = par_rows_with(&mut ordered, k, &mut masks, progress, Vec::new, |i, scratch, out, slot| {
+        let solved = par_rows_with(&mut ordered, k, &mut masks, progress, Scratch::default, |i, scratch, out, slot| {
             let r = self.receiver_order[i] as usize;
             let copy = still[r] && plan.as_ref().is_none_or(|p| p.unchanged);
             let step = match (&self.last, copy) {
@@ -530,22 +530,30 @@ impl Solver {
     /// (or `cached`, their masks from the last frame with the result then), then the moving
     /// casters, per `plan`. A mask equal to the last frame's takes the last result as it is.
     #[allow(clippy::too_many_arguments)]
-    fn receiver(&self, r: usize, frame: &Frame, casters: Option<(&Casters, &CasterPlan)>, cached: Option<(Kept, &[f32])>, scratch: &mut Vec<Vec3>, out: &mut [f32]) -> Step {
+    fn receiver<'a>(
+        &'a self,
+        r: usize,
+        frame: &Frame,
+        casters: Option<(&Casters, &CasterPlan)>,
+        cached: Option<(Kept, &[f32])>,
+        scratch: &mut Scratch<'a>,
+        out: &mut [f32],
+    ) -> Step {
         let Some(receiver) = Receiver::new(frame.positions[r], frame.normals[r], self.offset) else {
             out.fill(0.0);
             return Step { base: Some(Kept::default()), count: 0 };
         };
         // Each walk stops once the cells it has not drawn are blocked already (`occlude`).
-        let occlude = |skip: &[u32], known: Mask, scratch: &mut Vec<Vec3>| match casters {
-            Some((c, _)) => c.occlude(&self.table, &self.normalization, &receiver, skip, known, scratch),
+        let occlude = |skip: &[u32], known: Mask, corners: &mut Vec<Vec3>| match casters {
+            Some((c, _)) => c.occlude(&self.table, &self.normalization, &receiver, skip, known, corners),
             None => (Mask::EMPTY, 0),
         };
         let ((own, still), mut count) = match cached {
             Some((kept, _)) => ((kept.own, kept.still), 0),
             None => {
-                let (own, count) = self.own_mask(r, frame, &receiver);
+                let (own, count) = self.own_mask(r, frame, &receiver, scratch);
                 let (still, more) = match casters.filter(|_| own != self.disk) {
-                    Some((_, plan)) => occlude(&plan.skip_moving, own, scratch),
+                    Some((_, plan)) => occlude(&plan.skip_moving, own, &mut scratch.corners),
                     None => (Mask::EMPTY, 0),
                 };
                 ((own, still), count + more)
@@ -555,7 +563,7 @@ impl Solver {
         if let Some((c, plan)) = casters.filter(|_| own != self.disk) {
             let mut known = own;
             known.or_assign(&still);
-            let (mut cast, more) = occlude(&plan.skip_still, known, scratch);
+            let (mut cast, more) = occlude(&plan.skip_still, known, &mut scratch.corners);
             cast.or_assign(&still);
             total.or_assign(&c.close_pinholes(&cast));
             count += more;
@@ -572,19 +580,19 @@ impl Solver {
 
     /// The mask of receiver `r`'s own blockers and their count. The hot loop is compiled
     /// twice, for AVX2 + FMA and for the baseline, and picked at run time.
-    fn own_mask(&self, r: usize, frame: &Frame, receiver: &Receiver) -> (Mask, u64) {
+    fn own_mask<'a>(&'a self, r: usize, frame: &Frame, receiver: &Receiver, scratch: &mut Scratch<'a>) -> (Mask, u64) {
         #[cfg(target_arch = "x86_64")]
         if std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma") {
             // SAFETY: the CPU supports the features the function is compiled for.
-            return unsafe { self.own_mask_avx2(r, frame, receiver) };
+            return unsafe { self.own_mask_avx2(r, frame, receiver, scratch) };
         }
-        self.own_mask_portable(r, frame, receiver)
+        self.own_mask_portable(r, frame, receiver, scratch)
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
-    unsafe fn own_mask_avx2(&self, r: usize, frame: &Frame, receiver: &Receiver) -> (Mask, u64) {
-        self.own_mask_portable(r, frame, receiver)
+    unsafe fn own_mask_avx2<'a>(&'a self, r: usize, frame: &Frame, receiver: &Receiver, scratch: &mut Scratch<'a>) -> (Mask, u64) {
+        self.own_mask_portable(r, frame, receiver, scratch)
     }
 
     /// Down the group tree (`group_tree.rs`), nodes below the horizon skipped and distant
@@ -594,12 +602,13 @@ impl Solver {
     /// below the horizon. With potentially visible sets, also skipped: every node that holds
     /// no unit the receiver keeps (`pvs.rs`), unless a node above it is kept whole.
     #[inline(always)]
-    fn own_mask_portable(&self, r: usize, frame: &Frame, receiver: &Receiver) -> (Mask, u64) {
+    fn own_mask_portable<'a>(&'a self, r: usize, frame: &Frame, receiver: &Receiver, scratch: &mut Scratch<'a>) -> (Mask, u64) {
         let (tree, table, origin) = (&self.group_tree, &*self.table, receiver.origin);
         let pvs = self.pvs.as_ref().filter(|_| frame.use_pvs);
-        let mut drawing = Drawing::new(Viewer { origin, frame: &receiver.frame, exclude: r as u32 });
+        let Scratch { packets, stack, .. } = scratch;
+        let mut drawing = Drawing::new(Viewer { origin, frame: &receiver.frame, exclude: r as u32 }, packets);
         let lod2 = self.far_lod2();
-        let mut stack: Vec<u32> = Vec::with_capacity(64);
+        stack.clear();
         if !tree.nodes.is_empty() {
             stack.push(0);
         }
@@ -678,7 +687,7 @@ impl Solver {
     /// Group `g`'s blockers for receiver `r`: see `own_mask_portable`.
     /// `sets`: the potentially visible sets, when they choose the group's clusters.
     #[inline(always)]
-    fn group_blockers<'a>(&'a self, g: usize, r: usize, sets: Option<&Pvs>, frame: &Frame, receiver: &Receiver, drawing: &mut Drawing<'_, 'a>) {
+    fn group_blockers<'a>(&'a self, g: usize, r: usize, sets: Option<&Pvs>, frame: &Frame, receiver: &Receiver, drawing: &mut Drawing<'_, '_, 'a>) {
         let (h, table) = (&self.hierarchy, &*self.table);
         let first = g * GROUP;
         let clusters = (first + GROUP).min(h.clusters()) - first;
@@ -693,7 +702,7 @@ impl Solver {
             let far = !expanded & seen & above;
             for (p, packet) in self.coarse_packets.of(g).iter().enumerate() {
                 let lanes = far >> (p * LANES) & packet.lanes;
-                push_if(&mut drawing.packets, (packet, lanes), lanes != 0);
+                push_if(drawing.packets, (packet, lanes), lanes != 0);
             }
             drawing.end_source(table, Source::Coarse);
         }
@@ -704,7 +713,7 @@ impl Solver {
             let cluster_seen = !self.culled(receiver, &frame.bounds[c]);
             for packet in self.fine_packets.of(c) {
                 let keep = cluster_seen & !(self.blockers.cull & receiver.clearly_below_horizon(&packet.bounds));
-                push_if(&mut drawing.packets, (packet, u32::MAX), keep);
+                push_if(drawing.packets, (packet, u32::MAX), keep);
             }
         }
         drawing.end_source(table, Source::Fine);
@@ -715,25 +724,27 @@ impl Solver {
 /// rasterizer in batches of about `BATCH` (`Pipeline::rasterize_batch`), and the mask they
 /// draw. Large batches because each one ends in a branch the CPU mispredicts: drawn group by
 /// group, about a quarter of the 8k Suzanne's mispredicted branches were these.
-struct Drawing<'v, 'a> {
+struct Drawing<'v, 'p, 'a> {
     viewer: Viewer<'v>,
     pipeline: Pipeline,
-    packets: Vec<(&'a Packet, u32)>,
+    packets: &'p mut Vec<(&'a Packet, u32)>,
     mask: Mask,
     rasterized: u32,
 }
 
-impl<'v, 'a> Drawing<'v, 'a> {
+impl<'v, 'p, 'a> Drawing<'v, 'p, 'a> {
     const BATCH: usize = 64;
 
-    fn new(viewer: Viewer<'v>) -> Self {
-        Drawing { viewer, pipeline: Pipeline::default(), packets: Vec::with_capacity(2 * Self::BATCH), mask: Mask::EMPTY, rasterized: 0 }
+    /// Gathers into `packets` (a thread's, reused from receiver to receiver).
+    fn new(viewer: Viewer<'v>, packets: &'p mut Vec<(&'a Packet, u32)>) -> Self {
+        packets.clear();
+        Drawing { viewer, pipeline: Pipeline::default(), packets, mask: Mask::EMPTY, rasterized: 0 }
     }
 
     /// Rasterizes the gathered packets.
     #[inline(always)]
     fn draw(&mut self, table: &PlaneTable) {
-        self.rasterized += self.pipeline.rasterize_batch(table, &self.viewer, &self.packets, &mut self.mask);
+        self.rasterized += self.pipeline.rasterize_batch(table, &self.viewer, self.packets, &mut self.mask);
         self.packets.clear();
     }
 
@@ -755,6 +766,16 @@ impl<'v, 'a> Drawing<'v, 'a> {
         self.pipeline.drain(table, &mut self.mask);
         (self.mask, self.rasterized as u64)
     }
+}
+
+/// What a thread reuses from receiver to receiver, so that computing one allocates nothing.
+#[derive(Default)]
+struct Scratch<'a> {
+    /// The corners of the casters' blockers (`Casters::occlude`).
+    corners: Vec<Vec3>,
+    /// The packets the walk gathers (`Drawing`) and its stack of nodes (`own_mask`).
+    packets: Vec<(&'a Packet, u32)>,
+    stack: Vec<u32>,
 }
 
 /// What computing (or reusing) one receiver left: the masks of its own and of the still
