@@ -403,7 +403,8 @@ impl Solver {
     fn cluster_candidates(&self, g: usize, r: usize, receiver: &Receiver, frame: &Frame, candidates: &mut Vec<(f32, u32, Mask)>) {
         let first = g * GROUP;
         let clusters = (first + GROUP).min(self.hierarchy.clusters()) - first;
-        let expanded = self.expanded_clusters(r, receiver, frame, first, clusters);
+        let (near, _) = frame.spheres[g].sides(receiver.origin, receiver.frame.n);
+        let expanded = self.expanded_clusters(r, first, clusters, near);
         for i in 0..clusters {
             let c = first + i;
             let mask = if expanded >> i & 1 == 1 {
@@ -429,14 +430,14 @@ impl Solver {
     }
 
     /// Bits of the clusters `first..first + clusters` that receiver `r` sees at full
-    /// resolution: its ring, the clusters close to it, or all without the hierarchy.
+    /// resolution: its ring, the clusters close to it (`near`, `ClusterSpheres::sides`), or
+    /// all without the hierarchy.
     #[inline(always)]
-    fn expanded_clusters(&self, r: usize, receiver: &Receiver, frame: &Frame, first: usize, clusters: usize) -> u32 {
+    fn expanded_clusters(&self, r: usize, first: usize, clusters: usize, near: u32) -> u32 {
         if !self.blockers.hierarchy {
             return (1 << clusters) - 1;
         }
-        let near = self.hierarchy.near_of(r);
-        bits_of(near, first, clusters) | frame.spheres[first / GROUP].around(receiver.origin)
+        bits_of(self.hierarchy.near_of(r), first, clusters) | near
     }
 
     /// Per cluster, the bounding box of its coarse triangle and the fine triangles it owns in
@@ -625,7 +626,10 @@ impl Solver {
             match self.turn(n, bounds, origin, lod2) {
                 Turn::Group(g) => self.group_blockers(g, r, sets, frame, receiver, &mut drawing),
                 Turn::Proxy => {
-                    drawing.packets.extend(tree.proxies.of(n).iter().map(|packet| (packet, u32::MAX)));
+                    for packet in tree.proxies.of(n) {
+                        let keep = !(self.blockers.cull & receiver.clearly_below_horizon(&packet.bounds));
+                        push_if(drawing.packets, (packet, u32::MAX), keep);
+                    }
                     drawing.end_source(table, Source::Proxy);
                 }
                 Turn::Open([first, second]) => {
@@ -696,9 +700,10 @@ impl Solver {
         if seen == 0 || self.culled(receiver, &frame.group_bounds[g]) {
             return;
         }
-        let expanded = self.expanded_clusters(r, receiver, frame, first, clusters);
+        let (near, below) = frame.spheres[g].sides(receiver.origin, receiver.frame.n);
+        let expanded = self.expanded_clusters(r, first, clusters, near);
         // Clusters wholly below the horizon are dropped before their packets are handed over.
-        let above = !frame.spheres[g].clearly_below(receiver.origin, receiver.frame.n);
+        let above = !below;
         if self.blockers.hierarchy {
             let far = !expanded & seen & above;
             for (p, packet) in self.coarse_packets.of(g).iter().enumerate() {
@@ -832,7 +837,7 @@ fn bits_of(list: &[u32], first: usize, count: usize) -> u32 {
 #[derive(Clone, Copy)]
 struct ClusterSpheres {
     centres: [[f32; GROUP]; 3],
-    /// (near_scale x the radius)^2: the near test's (`around`).
+    /// (near_scale x the radius)^2: the near test's (`sides`).
     near2: [f32; GROUP],
     /// The radius, rounded up.
     radii: [f32; GROUP],
@@ -853,29 +858,21 @@ impl ClusterSpheres {
         out
     }
 
-    /// Bit i set when cluster i lies below the horizon of a receiver at `origin` with normal
-    /// `n` by a margin far above rounding: every corner of its coarse and fine triangles then
-    /// has a negative height in the receiver's frame, so the rasterizer would draw none of
-    /// them (`Receiver::clearly_below_horizon`, with the sphere).
+    /// Which clusters a receiver at `origin` with normal `n` lies within the near sphere of
+    /// (the first bits), and which lie below its horizon by a margin far above rounding (the
+    /// second): every corner of such a cluster's coarse and fine triangles has a negative
+    /// height in the receiver's frame, so the rasterizer would draw none of them
+    /// (`Receiver::clearly_below_horizon`, with the sphere). One loop for both, which share
+    /// the offsets from the centres.
     #[inline(always)]
-    fn clearly_below(&self, origin: Vec3, n: Vec3) -> u32 {
-        let mut below = [false; GROUP];
-        for (i, below) in below.iter_mut().enumerate() {
+    fn sides(&self, origin: Vec3, n: Vec3) -> (u32, u32) {
+        let (mut inside, mut below) = ([false; GROUP], [false; GROUP]);
+        for i in 0..GROUP {
             let d = [0, 1, 2].map(|a| self.centres[a][i] - origin[a]);
-            *below = d[0] * n[0] + d[1] * n[1] + d[2] * n[2] + self.radii[i] < -1e-5;
+            inside[i] = d[0] * d[0] + d[1] * d[1] + d[2] * d[2] < self.near2[i];
+            below[i] = d[0] * n[0] + d[1] * n[1] + d[2] * n[2] + self.radii[i] < -1e-5;
         }
-        bits16(&below)
-    }
-
-    /// Bit i set when cluster i's near sphere contains `origin`.
-    #[inline(always)]
-    fn around(&self, origin: Vec3) -> u32 {
-        let mut inside = [false; GROUP];
-        for (i, inside) in inside.iter_mut().enumerate() {
-            let d = [0, 1, 2].map(|a| self.centres[a][i] - origin[a]);
-            *inside = d[0] * d[0] + d[1] * d[1] + d[2] * d[2] < self.near2[i];
-        }
-        bits16(&inside)
+        (bits16(&inside), bits16(&below))
     }
 }
 
@@ -924,16 +921,18 @@ mod tests {
         assert_eq!(batch, [0, 3, 4]);
     }
 
+    const Z: Vec3 = [0.0, 0.0, 1.0];
+
     #[test]
     fn cluster_spheres_hold_the_receivers_within_their_near_radius_only() {
         let boxes = [[[-1.0, 0.0, 0.0], [1.0, 0.0, 0.0]], [[3.0, 0.0, 0.0], [7.0, 0.0, 0.0]], [[f32::NAN, 0.0, 0.0], [1.0, 0.0, 0.0]]];
         let spheres = ClusterSpheres::new(&boxes, 1.0);
-        assert_eq!(spheres.around([0.5, 0.0, 0.0]), 0b001);
-        assert_eq!(spheres.around([4.0, 0.0, 0.0]), 0b010);
-        assert_eq!(spheres.around([100.0, 0.0, 0.0]), 0);
+        assert_eq!(spheres.sides([0.5, 0.0, 0.0], Z).0, 0b001);
+        assert_eq!(spheres.sides([4.0, 0.0, 0.0], Z).0, 0b010);
+        assert_eq!(spheres.sides([100.0, 0.0, 0.0], Z).0, 0);
         // The lanes past the three clusters are centred at the origin and still hold nothing.
-        assert_eq!(spheres.around([0.0; 3]), 0b001);
-        assert_eq!(ClusterSpheres::new(&boxes, 2.0).around([-1.5, 0.0, 0.0]), 0b001);
+        assert_eq!(spheres.sides([0.0; 3], Z).0, 0b001);
+        assert_eq!(ClusterSpheres::new(&boxes, 2.0).sides([-1.5, 0.0, 0.0], Z).0, 0b001);
     }
 
     #[test]
@@ -942,9 +941,9 @@ mod tests {
         let spheres = ClusterSpheres::new(&boxes, 2.5);
         // Seen from above the first box (radius sqrt(3), centre 2 below): below only while the
         // whole sphere is, not just the box.
-        assert_eq!(spheres.clearly_below([0.0, 0.0, 0.0], [0.0, 0.0, 1.0]), 0b001);
-        assert_eq!(spheres.clearly_below([0.0, 0.0, -0.5], [0.0, 0.0, 1.0]), 0);
-        assert_eq!(spheres.clearly_below([0.0, 0.0, 10.0], [0.0, 0.0, 1.0]), 0b011);
-        assert_eq!(spheres.clearly_below([0.0, 0.0, 10.0], [0.0, 0.0, -1.0]), 0);
+        assert_eq!(spheres.sides([0.0, 0.0, 0.0], Z).1, 0b001);
+        assert_eq!(spheres.sides([0.0, 0.0, -0.5], Z).1, 0);
+        assert_eq!(spheres.sides([0.0, 0.0, 10.0], Z).1, 0b011);
+        assert_eq!(spheres.sides([0.0, 0.0, 10.0], [0.0, 0.0, -1.0]).1, 0);
     }
 }
