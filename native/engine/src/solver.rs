@@ -25,7 +25,7 @@ use crate::rasterizer::{Pipeline, Source, Viewer};
 use crate::caster_reuse::{CasterCache, CasterPlan, Kept};
 use crate::scene::casters::Casters;
 use crate::sh::ShBasis;
-use crate::transfer::{check_brdf, checked_downsample, checked_offset, welded_views, Receiver, Settings, View};
+use crate::transfer::{check_brdf, checked_downsample, checked_offset, welded_views, Receiver, Settings, View, HORIZON_MARGIN};
 
 /// How the solver picks blockers.
 #[derive(Clone, Debug)]
@@ -627,8 +627,7 @@ impl Solver {
                 Turn::Group(g) => self.group_blockers(g, r, sets, frame, receiver, &mut drawing),
                 Turn::Proxy => {
                     for packet in tree.proxies.of(n) {
-                        let keep = !(self.blockers.cull & receiver.clearly_below_horizon(&packet.bounds));
-                        push_if(drawing.packets, (packet, u32::MAX), keep);
+                        push_if(drawing.packets, (packet, u32::MAX), !self.packet_culled(receiver, packet));
                     }
                     drawing.end_source(table, Source::Proxy);
                 }
@@ -681,6 +680,14 @@ impl Solver {
         self.blockers.cull && receiver.below_horizon(bounds)
     }
 
+    /// Whether the walks drop a packet by its box: culling is on and the box is clearly below
+    /// the receiver's horizon. Without `&&`'s branch: the hand-over of packets is branch-free
+    /// (`push_if`).
+    #[inline(always)]
+    fn packet_culled(&self, receiver: &Receiver, packet: &Packet) -> bool {
+        self.blockers.cull & receiver.clearly_below_horizon(&packet.bounds)
+    }
+
     /// The square of the group tree's `far_lod`; 0 (every group opened) without the
     /// hierarchy. One place for the walk, the potentially visible sets' walk and `same_walk`,
     /// whose reuse is only sound when they agree.
@@ -702,8 +709,9 @@ impl Solver {
         }
         let (near, below) = frame.spheres[g].sides(receiver.origin, receiver.frame.n);
         let expanded = self.expanded_clusters(r, first, clusters, near);
-        // Clusters wholly below the horizon are dropped before their packets are handed over.
-        let above = !below;
+        // With culling on, clusters wholly below the horizon are dropped before their packets
+        // are handed over.
+        let above = if self.blockers.cull { !below } else { u32::MAX };
         if self.blockers.hierarchy {
             let far = !expanded & seen & above;
             for (p, packet) in self.coarse_packets.of(g).iter().enumerate() {
@@ -718,8 +726,7 @@ impl Solver {
             bits &= bits - 1;
             let cluster_seen = !self.culled(receiver, &frame.bounds[c]);
             for packet in self.fine_packets.of(c) {
-                let keep = cluster_seen & !(self.blockers.cull & receiver.clearly_below_horizon(&packet.bounds));
-                push_if(drawing.packets, (packet, u32::MAX), keep);
+                push_if(drawing.packets, (packet, u32::MAX), cluster_seen & !self.packet_culled(receiver, packet));
             }
         }
         drawing.end_source(table, Source::Fine);
@@ -870,7 +877,7 @@ impl ClusterSpheres {
         for i in 0..GROUP {
             let d = [0, 1, 2].map(|a| self.centres[a][i] - origin[a]);
             inside[i] = d[0] * d[0] + d[1] * d[1] + d[2] * d[2] < self.near2[i];
-            below[i] = d[0] * n[0] + d[1] * n[1] + d[2] * n[2] + self.radii[i] < -1e-5;
+            below[i] = d[0] * n[0] + d[1] * n[1] + d[2] * n[2] + self.radii[i] < -HORIZON_MARGIN;
         }
         (bits16(&inside), bits16(&below))
     }

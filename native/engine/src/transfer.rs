@@ -184,6 +184,12 @@ pub(crate) fn welded_views(first_copy: &[u32], input_count: usize, brdf: Brdf, v
     }
 }
 
+/// How far below a receiver's horizon (in the normalised positions' units) a bound must lie
+/// for the walks to skip what it holds without changing a result: far above the rounding of
+/// the heights the rasterizer computes (`Receiver::clearly_below_horizon`, the solver's
+/// cluster spheres).
+pub const HORIZON_MARGIN: f32 = 1e-5;
+
 /// A receiver's tangent frame and the point it sees from, `offset` along its normal.
 #[derive(Clone, Copy)]
 pub struct Receiver {
@@ -216,11 +222,12 @@ impl Receiver {
         dot(self.frame.n, self.highest_corner(bounds)) <= dot(self.frame.n, self.origin)
     }
 
-    /// `below_horizon` with a margin far above rounding: every point of the box is then below
-    /// the horizon in the receiver's local coordinates too, so skipping it changes no result.
+    /// `below_horizon` with a margin far above rounding (`HORIZON_MARGIN`): every point of
+    /// the box is then below the horizon in the receiver's local coordinates too, so skipping
+    /// it changes no result.
     #[inline(always)]
     pub fn clearly_below_horizon(&self, bounds: &[Vec3; 2]) -> bool {
-        dot(self.frame.n, self.highest_corner(bounds)) < dot(self.frame.n, self.origin) - 1e-5
+        dot(self.frame.n, self.highest_corner(bounds)) < dot(self.frame.n, self.origin) - HORIZON_MARGIN
     }
 
     /// The box corner farthest along the normal.
