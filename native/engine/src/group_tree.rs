@@ -13,7 +13,7 @@
 //! does.
 
 use crate::hierarchy::{Hierarchy, GROUP};
-use crate::mesh::{Vec3, EMPTY_BOX};
+use crate::mesh::{box_centre, half_diagonal2, Vec3, EMPTY_BOX};
 use crate::packets::PacketLists;
 use crate::scene::clusters::{simplify, union};
 
@@ -91,9 +91,8 @@ impl GroupTree {
     /// than PROXY_ERROR_ANGLE.
     #[inline(always)]
     pub fn is_far(&self, n: usize, b: &[Vec3; 2], origin: Vec3, lod2: f32) -> bool {
-        let r2: f32 = (0..3).map(|a| (0.5 * (b[1][a] - b[0][a])).powi(2)).sum();
         let d2 = centre_distance2(b, origin);
-        r2 < lod2 * d2 && self.near_limit2[n] <= d2
+        half_diagonal2(b) < lod2 * d2 && self.near_limit2[n] <= d2
     }
 
     /// Per node, the box around its groups' boxes (`group_bounds`) and its proxy.
@@ -117,7 +116,8 @@ impl GroupTree {
 /// The squared distance from `origin` to the centre of box `b`.
 #[inline(always)]
 pub fn centre_distance2(b: &[Vec3; 2], origin: Vec3) -> f32 {
-    (0..3).map(|a| (0.5 * (b[0][a] + b[1][a]) - origin[a]).powi(2)).sum()
+    let centre = box_centre(b);
+    (0..3).map(|a| (centre[a] - origin[a]).powi(2)).sum()
 }
 
 /// Halves `first..end` down to single groups; appends nodes in pre-order, returns the root.
@@ -179,8 +179,7 @@ mod tests {
         let lod2 = FAR_LOD * FAR_LOD;
         let mut error_decided = 0;
         for (n, b) in bounds.iter().enumerate().filter(|(n, _)| tree.nodes[*n].children != LEAF) {
-            let centre: Vec3 = [0, 1, 2].map(|a| 0.5 * (b[0][a] + b[1][a]));
-            let radius = (0..3).map(|a| (0.5 * (b[1][a] - b[0][a])).powi(2)).sum::<f32>().sqrt();
+            let (centre, radius) = (box_centre(b), half_diagonal2(b).sqrt());
             let (by_radius, by_error) = (radius / FAR_LOD, tree.near_limit2[n].sqrt());
             assert!(by_error.is_finite(), "node {n}");
             let seen_from = |d: f32| tree.is_far(n, b, [centre[0] + d, centre[1], centre[2]], lod2);

@@ -141,6 +141,18 @@ impl WeldedMesh {
 /// The box that holds nothing: any point widens it.
 pub const EMPTY_BOX: [Vec3; 2] = [[f32::INFINITY; 3], [f32::NEG_INFINITY; 3]];
 
+/// The centre of box `b`.
+#[inline(always)]
+pub fn box_centre(b: &[Vec3; 2]) -> Vec3 {
+    [0, 1, 2].map(|a| 0.5 * (b[0][a] + b[1][a]))
+}
+
+/// Half the diagonal of box `b`, squared: the squared radius of the sphere around it.
+#[inline(always)]
+pub fn half_diagonal2(b: &[Vec3; 2]) -> f32 {
+    [0, 1, 2].map(|a| 0.5 * (b[1][a] - b[0][a])).iter().map(|d| d * d).sum()
+}
+
 /// The axis-aligned box around `points` ([min, max]; `EMPTY_BOX` for none).
 pub fn box_of(points: impl Iterator<Item = Vec3>) -> [Vec3; 2] {
     let mut b = EMPTY_BOX;

@@ -16,7 +16,7 @@ use crate::error::{Error, Result};
 use crate::group_tree::{centre_distance2, GroupTree, FAR_LOD, LEAF};
 use crate::hierarchy::{default_coarse_triangles, morton_permutation, Hierarchy, GROUP};
 use crate::integrate::{Brdf, Quadrature};
-use crate::mesh::{box_of, check_finite, weld, welded_normals, Normalization, Vec3};
+use crate::mesh::{box_centre, box_of, check_finite, half_diagonal2, weld, welded_normals, Normalization, Vec3};
 use crate::progress::{par_rows, par_rows_with, Progress};
 use crate::pvs::{contributing, node_unit, Pvs};
 use crate::plane_table::PlaneTable;
@@ -854,12 +854,13 @@ impl ClusterSpheres {
     /// The spheres around `boxes` (at most `GROUP`).
     fn new(boxes: &[[Vec3; 2]], near_scale: f32) -> Self {
         let mut out = ClusterSpheres { centres: [[0.0; GROUP]; 3], near2: [-1.0; GROUP], radii: [f32::INFINITY; GROUP] };
-        for (i, [lo, hi]) in boxes.iter().enumerate() {
-            (0..3).for_each(|a| out.centres[a][i] = 0.5 * (lo[a] + hi[a]));
-            let half_diagonal2 = [0, 1, 2].map(|a| 0.5 * (hi[a] - lo[a])).iter().map(|d| d * d).sum::<f32>();
-            if half_diagonal2.is_finite() {
-                out.near2[i] = half_diagonal2 * near_scale.powi(2);
-                out.radii[i] = half_diagonal2.sqrt() * 1.0001;
+        for (i, b) in boxes.iter().enumerate() {
+            let centre = box_centre(b);
+            (0..3).for_each(|a| out.centres[a][i] = centre[a]);
+            let r2 = half_diagonal2(b);
+            if r2.is_finite() {
+                out.near2[i] = r2 * near_scale.powi(2);
+                out.radii[i] = r2.sqrt() * 1.0001;
             }
         }
         out

@@ -2,7 +2,7 @@
 //! primary visibility). Binned surface-area heuristic build, stack traversal nearest child
 //! first, Moller-Trumbore tests in f64 so that hits at pixel centres are exact to rounding.
 
-use crate::mesh::Vec3;
+use crate::mesh::{box_centre, Vec3, EMPTY_BOX};
 
 const LEAF_SIZE: usize = 4;
 const BINS: usize = 16;
@@ -52,18 +52,16 @@ fn area(b: &[Vec3; 2]) -> f32 {
     e[0] * e[1] + e[1] * e[2] + e[2] * e[0]
 }
 
-const EMPTY: [Vec3; 2] = [[f32::INFINITY; 3], [f32::NEG_INFINITY; 3]];
-
 impl Bvh {
     pub fn build(corners: Vec<[Vec3; 3]>) -> Bvh {
         let boxes: Vec<[Vec3; 2]> = corners.iter().map(bounds).collect();
-        let centres: Vec<Vec3> = boxes.iter().map(|b| [0, 1, 2].map(|a| 0.5 * (b[0][a] + b[1][a]))).collect();
+        let centres: Vec<Vec3> = boxes.iter().map(box_centre).collect();
         let mut order: Vec<u32> = (0..corners.len() as u32).collect();
         let mut nodes = vec![Node { lo: [0.0; 3], hi: [0.0; 3], start: 0, count: 0 }];
         // (node index, first, end) still to split.
         let mut work = vec![(0usize, 0usize, order.len())];
         while let Some((node, first, end)) = work.pop() {
-            let mut b = EMPTY;
+            let mut b = EMPTY_BOX;
             order[first..end].iter().for_each(|&t| grow(&mut b, &boxes[t as usize]));
             nodes[node].lo = b[0];
             nodes[node].hi = b[1];
@@ -186,12 +184,12 @@ fn intersect(tri: &[Vec3; 3], o: [f64; 3], d: [f64; 3]) -> Option<(f64, f64, f64
 /// Splits `order` (a node's triangles) by the binned SAH; the left part's length, or None
 /// when a leaf is cheaper or the centroids cannot be told apart.
 fn split(order: &mut [u32], boxes: &[[Vec3; 2]], centres: &[Vec3]) -> Option<usize> {
-    let mut cb = EMPTY;
+    let mut cb = EMPTY_BOX;
     for &t in order.iter() {
         let c = centres[t as usize];
         grow(&mut cb, &[c, c]);
     }
-    let mut parent = EMPTY;
+    let mut parent = EMPTY_BOX;
     order.iter().for_each(|&t| grow(&mut parent, &boxes[t as usize]));
     let leaf_cost = order.len() as f32 * area(&parent);
     let mut best: Option<(f32, usize, f32)> = None; // (cost, axis, position)
@@ -203,7 +201,7 @@ fn split(order: &mut [u32], boxes: &[[Vec3; 2]], centres: &[Vec3]) -> Option<usi
         let scale = BINS as f32 / (hi - lo);
         let bin = |t: u32| (((centres[t as usize][axis] - lo) * scale) as usize).min(BINS - 1);
         let mut counts = [0usize; BINS];
-        let mut bb = [EMPTY; BINS];
+        let mut bb = [EMPTY_BOX; BINS];
         for &t in order.iter() {
             let i = bin(t);
             counts[i] += 1;
@@ -211,14 +209,14 @@ fn split(order: &mut [u32], boxes: &[[Vec3; 2]], centres: &[Vec3]) -> Option<usi
         }
         let mut right_area = [0.0f32; BINS];
         let mut right_count = [0usize; BINS];
-        let (mut acc, mut n) = (EMPTY, 0);
+        let (mut acc, mut n) = (EMPTY_BOX, 0);
         for i in (1..BINS).rev() {
             grow(&mut acc, &bb[i]);
             n += counts[i];
             right_area[i] = area(&acc);
             right_count[i] = n;
         }
-        let (mut acc, mut n) = (EMPTY, 0);
+        let (mut acc, mut n) = (EMPTY_BOX, 0);
         for i in 0..BINS - 1 {
             grow(&mut acc, &bb[i]);
             n += counts[i];

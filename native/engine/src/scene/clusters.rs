@@ -277,15 +277,15 @@ impl MeshTree {
 }
 
 pub use crate::mesh::{box_of, EMPTY_BOX};
+use crate::mesh::{box_centre, half_diagonal2};
 
 pub fn union(a: &[Vec3; 2], b: &[Vec3; 2]) -> [Vec3; 2] {
     [[0, 1, 2].map(|i| a[0][i].min(b[0][i])), [0, 1, 2].map(|i| a[1][i].max(b[1][i]))]
 }
 
 pub fn sphere_of(b: &[Vec3; 2]) -> [f32; 4] {
-    let c = [0, 1, 2].map(|a| 0.5 * (b[0][a] + b[1][a]));
-    let r = [0, 1, 2].map(|a| 0.5 * (b[1][a] - b[0][a])).iter().map(|d| d * d).sum::<f32>().sqrt();
-    [c[0], c[1], c[2], r]
+    let c = box_centre(b);
+    [c[0], c[1], c[2], half_diagonal2(b).sqrt()]
 }
 
 fn centroid(positions: &[Vec3], t: &[u32; 3]) -> Vec3 {

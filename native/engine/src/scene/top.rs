@@ -2,7 +2,7 @@
 //! so that a receiver culls whole groups of objects below its horizon at once. Built when
 //! instances are added; when instances move or meshes deform it is only refitted.
 
-use crate::mesh::Vec3;
+use crate::mesh::{box_centre, Vec3};
 
 use super::clusters::{box_of, union, EMPTY_BOX, NO_CHILD};
 
@@ -21,7 +21,7 @@ pub struct TopTree {
 impl TopTree {
     /// Over the instances' world boxes.
     pub fn build(instance_bounds: &[[Vec3; 2]]) -> TopTree {
-        let centres: Vec<Vec3> = instance_bounds.iter().map(|b| [0, 1, 2].map(|a| 0.5 * (b[0][a] + b[1][a]))).collect();
+        let centres: Vec<Vec3> = instance_bounds.iter().map(box_centre).collect();
         let mut order: Vec<u32> = (0..instance_bounds.len() as u32).collect();
         let mut nodes = Vec::new();
         if !order.is_empty() {
