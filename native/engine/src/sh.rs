@@ -213,7 +213,7 @@ pub fn clamped_cosine_zonal(l: usize) -> f32 {
         _ => {
             // 2 pi (-1)^(l/2 - 1) / ((l+2)(l-1)) * l! / (2^l ((l/2)!)^2)
             let half = l / 2;
-            let sign = if (half - 1) % 2 == 0 { 1.0 } else { -1.0 };
+            let sign = if (half - 1).is_multiple_of(2) { 1.0 } else { -1.0 };
             let fact = |n: usize| (1..=n).fold(1.0f64, |acc, k| acc * k as f64);
             2.0 * PI * sign / ((l + 2) as f64 * (l - 1) as f64) * fact(l) / (2f64.powi(l as i32) * fact(half).powi(2))
         }

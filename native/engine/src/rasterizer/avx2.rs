@@ -11,7 +11,7 @@ use crate::disk_mask::Mask;
 use crate::packets::{Packet, LANES};
 use crate::plane_table::PlaneTable;
 
-use super::{LocalCorners, Pipeline, Viewer, FLAT_CONE_SQUARED, LOW_BAND_Z};
+use super::{LocalCorners, Pipeline, Viewer, AVX2, FLAT_CONE_SQUARED, LOW_BAND_Z};
 
 type V3 = [__m256; 3];
 
@@ -58,7 +58,7 @@ unsafe fn is_vertex(packet: &Packet, k: usize, exclude: __m256i) -> __m256i {
 pub(super) unsafe fn rasterize_batch(pipeline: &mut Pipeline, table: &PlaneTable, viewer: &Viewer, batch: &[(&Packet, u32)], mask: &mut Mask) -> u32 {
     let mut drawn = 0;
     for &(packet, lanes) in batch {
-        drawn += pipeline.rasterize_viewed::<true>(table, viewer, packet, lanes, mask);
+        drawn += pipeline.rasterize_viewed::<AVX2>(table, viewer, packet, lanes, mask);
     }
     drawn
 }
@@ -136,16 +136,41 @@ unsafe fn solid_codes(table: &PlaneTable, [pa, pb, pc]: [V3; 3], codes: &mut [[u
 }
 
 #[cfg(test)]
-mod tests {
+pub(super) mod tests {
     use super::super::{edge_codes_portable, packet_codes_portable};
     use super::*;
     use crate::integrate::Frame;
 
     /// Reproducible random corners (`test_random`).
-    struct Corners(u32);
+    pub(in crate::rasterizer) struct Corners(pub u32);
 
     impl Corners {
-        fn next(&mut self) -> f32 {
+        /// A packet of eight random lanes (`corner`); every fifth round, odd kinds of corners.
+        pub(in crate::rasterizer) fn packet(&mut self, round: u32) -> Packet {
+            let mut packet = Packet { corners: [[[0.0; LANES]; 3]; 3], ids: [[0; LANES]; 3], lanes: 0xff, bounds: [[0.0; 3]; 2] };
+            for i in 0..LANES {
+                let kind = if round.is_multiple_of(5) { self.0 >> 3 } else { 7 };
+                for k in 0..3 {
+                    let c = self.corner(if k == 0 { kind } else { 7 });
+                    (0..3).for_each(|j| packet.corners[k][j][i] = c[j]);
+                    packet.ids[k][i] = self.0 % 64;
+                }
+            }
+            packet
+        }
+
+        /// A receiver's tangent frame, its normal mostly up, and its origin near zero.
+        pub(in crate::rasterizer) fn frame(&mut self) -> (Frame, [f32; 3]) {
+            let n = {
+                let v = [self.next(), self.next(), self.next() + 2.0];
+                let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+                v.map(|c| c / l)
+            };
+            let (t, b) = crate::mesh::tangent_frame(n);
+            (Frame { t, b, n }, [self.next() * 0.1, self.next() * 0.1, self.next() * 0.1])
+        }
+
+        pub(in crate::rasterizer) fn next(&mut self) -> f32 {
             crate::test_random::xorshift32(&mut self.0) as f32 / u32::MAX as f32 * 2.0 - 1.0
         }
 
@@ -173,23 +198,8 @@ mod tests {
         for resolution in [12, 96, 128, 512] {
             let table = PlaneTable::shared(resolution).unwrap();
             for round in 0..50_000u32 {
-                let mut packet = Packet { corners: [[[0.0; LANES]; 3]; 3], ids: [[0; LANES]; 3], lanes: 0xff, bounds: [[0.0; 3]; 2] };
-                for i in 0..LANES {
-                    let kind = if round % 5 == 0 { rng.0 >> 3 } else { 7 };
-                    for k in 0..3 {
-                        let c = rng.corner(if k == 0 { kind } else { 7 });
-                        (0..3).for_each(|j| packet.corners[k][j][i] = c[j]);
-                        packet.ids[k][i] = rng.0 % 64;
-                    }
-                }
-                let n = {
-                    let v = [rng.next(), rng.next(), rng.next() + 2.0];
-                    let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
-                    v.map(|c| c / l)
-                };
-                let (t, b) = crate::mesh::tangent_frame(n);
-                let frame = Frame { t, b, n };
-                let origin = [rng.next() * 0.1, rng.next() * 0.1, rng.next() * 0.1];
+                let packet = rng.packet(round);
+                let (frame, origin) = rng.frame();
                 let viewer = Viewer { origin, frame: &frame, exclude: rng.0 % 64 };
                 let lanes = rng.0 & 0xff;
                 let (mut portable, mut simd) = ([[7u32; LANES]; 3], [[7u32; LANES]; 3]);

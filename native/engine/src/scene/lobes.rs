@@ -35,7 +35,7 @@ pub fn lobe_integrals(masks: &[Mask], lobes: &[Vec3], lobe_count: usize, moments
             lobes.len()
         )));
     }
-    if values.is_empty() || values.len() % MASK_CELLS != 0 {
+    if values.is_empty() || !values.len().is_multiple_of(MASK_CELLS) {
         return Err(Error::invalid(format!("values must have {MASK_CELLS} rows, got {} numbers", values.len())));
     }
     let k = values.len() / MASK_CELLS;

@@ -463,7 +463,7 @@ impl Scene {
             let (p, n) = (&points[range.clone()], &normals[range]);
             let walk = self.validity_walk;
             self.validity_walk.chunks += 1;
-            let (m, v) = if walk.facing_pays || walk.chunks % RETRY == 0 {
+            let (m, v) = if walk.facing_pays || walk.chunks.is_multiple_of(RETRY) {
                 by_facing += 1;
                 let (m, v, undecided) = self.by_facing(p, n, offset)?;
                 self.validity_walk.facing_pays = 2 * undecided <= p.len();
