@@ -440,6 +440,25 @@ impl PlaneTable {
         out
     }
 
+    /// `fetches` of sixteen lanes' codes in AVX-512 registers (`[edge]`), the same offsets and
+    /// flips.
+    ///
+    /// # Safety
+    /// The CPU must support AVX-512F.
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    pub unsafe fn fetches_avx512(&self, codes: [__m512i; 3]) -> Fetches<{ 2 * LANES }> {
+        let last = _mm512_set1_epi32(((self.masks.len() - 1) * MASK_BYTES) as i32);
+        let mut out = Fetches::default();
+        for (e, code) in codes.into_iter().enumerate() {
+            let stored = _mm512_andnot_si512(_mm512_set1_epi32(COMPLEMENT as i32), code);
+            let offset = _mm512_min_epu32(_mm512_slli_epi32::<{ MASK_BYTES.trailing_zeros() }>(stored), last);
+            _mm512_storeu_si512(out.offsets[e].as_mut_ptr() as *mut __m512i, offset);
+            _mm512_storeu_si512(out.flips[e].as_mut_ptr() as *mut __m512i, _mm512_srai_epi32::<31>(code));
+        }
+        out
+    }
+
     /// Asks the CPU to bring the masks of the `lanes` of `fetches` into cache ahead of use.
     #[inline(always)]
     pub fn prefetch(&self, fetches: &Fetches, lanes: u32) {
@@ -503,14 +522,20 @@ const COMPLEMENT: u32 = 1 << 31;
 
 const MASK_BYTES: usize = std::mem::size_of::<Mask>();
 
-/// Where the masks of the three edge codes of `LANES` triangles lie (`PlaneTable::fetches`):
+/// Where the masks of the three edge codes of `N` triangles lie (`PlaneTable::fetches`):
 /// byte offsets of their stored masks, clamped to the table so that reading them needs no
 /// check, and their flips (0, or all ones for a complemented code). Made once per packet in
 /// vector code, where the drain computed them triangle by triangle.
-#[derive(Clone, Copy, Default)]
-pub struct Fetches {
-    offsets: [[u32; LANES]; 3],
-    flips: [[i32; LANES]; 3],
+#[derive(Clone, Copy)]
+pub struct Fetches<const N: usize = LANES> {
+    offsets: [[u32; N]; 3],
+    flips: [[i32; N]; 3],
+}
+
+impl<const N: usize> Default for Fetches<N> {
+    fn default() -> Self {
+        Fetches { offsets: [[0; N]; 3], flips: [[0; N]; 3] }
+    }
 }
 
 #[cfg(test)]
@@ -544,6 +569,36 @@ mod tests {
         }
         assert_eq!(fetches.offsets[0][6], 7 * MASK_BYTES as u32);
         assert_eq!((fetches.flips[0][1], fetches.flips[0][5], fetches.flips[2][5]), (-1, 0, -1));
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn avx512_fetches_equal_the_portable_ones() {
+        if !std::is_x86_feature_detected!("avx512f") {
+            return;
+        }
+        let mut state = 0x1b87_3593;
+        for resolution in [12, 128] {
+            let table = PlaneTable::shared(resolution).unwrap();
+            let wild = [u32::MAX, COMPLEMENT, COMPLEMENT - 1, table.masks.len() as u32, 1 << 25, 0, 7, COMPLEMENT | 3];
+            for round in 0..2_000 {
+                let codes: [[u32; 2 * LANES]; 3] = std::array::from_fn(|_| {
+                    std::array::from_fn(|i| match round {
+                        0 => wild[i % LANES] ^ (i as u32 / 8 * COMPLEMENT),
+                        _ => crate::test_random::xorshift32(&mut state) >> (round % 8),
+                    })
+                });
+                // SAFETY: the CPU supports AVX-512F (checked above); the loads read 16 lanes.
+                let wide = unsafe { table.fetches_avx512(codes.map(|c| _mm512_loadu_si512(c.as_ptr() as *const __m512i))) };
+                for half in 0..2 {
+                    let narrow = table.fetches(&codes.map(|c| c[LANES * half..LANES * (half + 1)].try_into().unwrap()));
+                    for e in 0..3 {
+                        assert_eq!(wide.offsets[e][LANES * half..LANES * (half + 1)], narrow.offsets[e], "round {round}, half {half}, edge {e}");
+                        assert_eq!(wide.flips[e][LANES * half..LANES * (half + 1)], narrow.flips[e], "round {round}, half {half}, edge {e}");
+                    }
+                }
+            }
+        }
     }
 
     #[test]

@@ -171,9 +171,8 @@ fn lane_bits(lanes: &[bool; LANES]) -> u32 {
 /// ORs triangles into a mask with the table fetches pipelined: the masks of one packet are
 /// prefetched when its texels are known and OR-ed only when the next packet's texels are (or
 /// at `drain`), by which time they have arrived. On an AMD EPYC the fetches were what the
-/// kernel waited on; on a Xeon with 2 MiB of L2 per core, the instructions of the drain are;
-/// on an EPYC with Zen 5 the prefetches cost more than they saved, and the AVX-512 kernel
-/// leaves them out (docs/solver_speed.md).
+/// kernel waited on; on a Xeon with 2 MiB of L2 per core, the instructions of the drain are
+/// (docs/solver_speed.md). The AVX-512 kernel pipelines its own fetches, without prefetches.
 #[derive(Default)]
 pub struct Pipeline {
     /// Where the masks of the packets' edge codes lie: the previous packet's, prefetched and
@@ -189,22 +188,17 @@ pub struct Pipeline {
 }
 
 impl Pipeline {
-    /// Prefetches the masks of the `lanes` of `codes` (not in the AVX-512 kernel), ORs the
-    /// pending ones into `mask` and makes these pending.
+    /// Prefetches the masks of the `lanes` of `codes`, ORs the pending ones into `mask` and
+    /// makes these pending.
     ///
     /// # Safety
-    /// With `KERNEL` other than `PORTABLE`, the CPU must support its features.
+    /// With `AVX2`, the CPU must support AVX2.
     #[inline(always)]
-    unsafe fn advance<const KERNEL: u8>(&mut self, table: &PlaneTable, codes: &[[u32; LANES]; 3], lanes: u32, mask: &mut Mask) {
+    unsafe fn advance<const AVX2: bool>(&mut self, table: &PlaneTable, codes: &[[u32; LANES]; 3], lanes: u32, mask: &mut Mask) {
         let next = 1 - self.pending;
         self.fetches[next] = table.fetches(codes);
-        // The AVX-512 kernel leaves the fetches to the out-of-order core: on an AMD EPYC (Zen 5)
-        // its solves took 15 % longer with the prefetches, which gained nothing there even
-        // for the AVX2 kernel (docs/solver_speed.md).
-        if KERNEL != AVX512 {
-            table.prefetch(&self.fetches[next], lanes);
-        }
-        self.drain_pending::<KERNEL>(table, mask);
+        table.prefetch(&self.fetches[next], lanes);
+        self.drain_pending::<AVX2>(table, mask);
         self.pending = next;
         self.pending_lanes = lanes;
     }
@@ -213,23 +207,17 @@ impl Pipeline {
     #[inline(always)]
     pub fn drain(&mut self, table: &PlaneTable, mask: &mut Mask) {
         // SAFETY: the portable drain dispatches at run time.
-        unsafe { self.drain_pending::<PORTABLE>(table, mask) }
+        unsafe { self.drain_pending::<false>(table, mask) }
     }
 
-    /// `drain`, with `KERNEL` straight into that kernel's drain, which inlines into its callers.
+    /// `drain`, with `AVX2` straight into the AVX2 drain, which inlines into AVX2 kernels.
     ///
     /// # Safety
-    /// With `KERNEL` other than `PORTABLE`, the CPU must support its features.
+    /// With `AVX2`, the CPU must support AVX2.
     #[inline(always)]
-    unsafe fn drain_pending<const KERNEL: u8>(&mut self, table: &PlaneTable, mask: &mut Mask) {
+    unsafe fn drain_pending<const AVX2: bool>(&mut self, table: &PlaneTable, mask: &mut Mask) {
         #[cfg(target_arch = "x86_64")]
-        if KERNEL == AVX512 {
-            table.or_triangles_avx512_inlined(&self.fetches[self.pending], self.pending_lanes, mask);
-            self.pending_lanes = 0;
-            return;
-        }
-        #[cfg(target_arch = "x86_64")]
-        if KERNEL == AVX2 {
+        if AVX2 {
             table.or_triangles_avx2_inlined(&self.fetches[self.pending], self.pending_lanes, mask);
             self.pending_lanes = 0;
             return;
@@ -255,14 +243,15 @@ impl Pipeline {
         mask: &mut Mask,
     ) -> u32 {
         // SAFETY: the portable kernel dispatches at run time.
-        unsafe { self.rasterize_viewed::<PORTABLE>(table, &Viewer { origin, frame, exclude }, packet, lanes, mask) }
+        unsafe { self.rasterize_viewed::<false>(table, &Viewer { origin, frame, exclude }, packet, lanes, mask) }
     }
 
     /// `rasterize_packet` for every packet of `batch`, each with the lanes given beside it,
     /// seen from `viewer`. In one call, so that the AVX2 and AVX-512 kernels
     /// (`avx2::rasterize_batch`, `avx512::rasterize_batch`) run the batch with their packet
     /// arithmetic and drain inlined: a call per packet, each making the viewer's broadcasts
-    /// again, cost about 5 % of the solver's instructions.
+    /// again, cost about 5 % of the solver's instructions. The AVX-512 kernel draws the whole
+    /// batch into `mask`; the others may leave their last packet pending until `drain`.
     #[inline(always)]
     pub(crate) fn rasterize_batch(&mut self, table: &PlaneTable, viewer: &Viewer, batch: &[(&Packet, u32)], mask: &mut Mask) -> u32 {
         #[cfg(target_arch = "x86_64")]
@@ -270,27 +259,26 @@ impl Pipeline {
             // The census counts packet by packet, in `rasterize_viewed`.
             if !cfg!(feature = "census") && avx512_kernel() {
                 // SAFETY: the CPU supports the AVX-512 subsets the kernel is compiled for.
-                return unsafe { avx512::rasterize_batch(self, table, viewer, batch, mask) };
+                return unsafe { avx512::rasterize_batch(table, viewer, batch, mask) };
             }
             // SAFETY: the CPU supports AVX2.
             return unsafe { avx2::rasterize_batch(self, table, viewer, batch, mask) };
         }
         // SAFETY: the portable kernel dispatches at run time.
-        batch.iter().map(|&(packet, lanes)| unsafe { self.rasterize_viewed::<PORTABLE>(table, viewer, packet, lanes, mask) }).sum()
+        batch.iter().map(|&(packet, lanes)| unsafe { self.rasterize_viewed::<false>(table, viewer, packet, lanes, mask) }).sum()
     }
 
-    /// `rasterize_packet` seen from `viewer`; with `KERNEL` other than `PORTABLE`, through the
-    /// AVX2 packet arithmetic and that kernel's drain directly.
+    /// `rasterize_packet` seen from `viewer`; with `AVX2`, through the AVX2 kernels directly.
     ///
     /// # Safety
-    /// With `KERNEL` other than `PORTABLE`, the CPU must support its features.
+    /// With `AVX2`, the CPU must support AVX2.
     #[inline(always)]
-    unsafe fn rasterize_viewed<const KERNEL: u8>(&mut self, table: &PlaneTable, viewer: &Viewer, packet: &Packet, lanes: u32, mask: &mut Mask) -> u32 {
+    unsafe fn rasterize_viewed<const AVX2: bool>(&mut self, table: &PlaneTable, viewer: &Viewer, packet: &Packet, lanes: u32, mask: &mut Mask) -> u32 {
         let mut codes = [[0u32; LANES]; 3];
         let lanes = lanes & packet.lanes;
         #[cfg(target_arch = "x86_64")]
         let (candidates, solid) =
-            if KERNEL != PORTABLE { avx2::packet_codes_inlined(table, viewer, packet, lanes, &mut codes) } else { packet_codes(table, viewer, packet, lanes, &mut codes) };
+            if AVX2 { avx2::packet_codes_inlined(table, viewer, packet, lanes, &mut codes) } else { packet_codes(table, viewer, packet, lanes, &mut codes) };
         #[cfg(not(target_arch = "x86_64"))]
         let (candidates, solid) = packet_codes(table, viewer, packet, lanes, &mut codes);
         #[cfg(feature = "census")]
@@ -300,14 +288,14 @@ impl Pipeline {
         }
         #[cfg(feature = "census")]
         census::count(table, &local_corners(viewer.origin, viewer.frame, packet), &codes, candidates & solid, &mut self.seen);
-        self.advance::<KERNEL>(table, &codes, candidates & solid, mask);
+        self.advance::<AVX2>(table, &codes, candidates & solid, mask);
         candidates.count_ones()
     }
 }
 
 /// Whether `rasterize_batch` runs the AVX-512 kernel: where the CPU has AVX-512 F, VL, BW and
 /// DQ, unless the environment variable `HEMISHADOW_NO_AVX512` is set (to time or rule out the
-/// kernel; its results are the AVX2 kernel's bit for bit).
+/// kernel; its masks are the AVX2 kernel's bit for bit).
 #[cfg(target_arch = "x86_64")]
 fn avx512_kernel() -> bool {
     static CHOICE: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
@@ -322,13 +310,6 @@ fn has_avx512() -> bool {
         && std::is_x86_feature_detected!("avx512bw")
         && std::is_x86_feature_detected!("avx512dq")
 }
-
-/// Which kernel a pipelined loop is compiled for and inlines (`Pipeline::advance`): the
-/// portable one, which dispatches at run time, or straight AVX2 or AVX-512 code, callable only
-/// from functions compiled for those features.
-const PORTABLE: u8 = 0;
-const AVX2: u8 = 1;
-const AVX512: u8 = 2;
 
 /// Where a packet is seen from: a receiver's origin and tangent frame, and its vertex, whose
 /// own triangles are not drawn.
@@ -492,7 +473,7 @@ impl TriangleBatch {
         let mut codes = [[0u32; LANES]; 3];
         let solid = edge_codes(table, corners, &mut codes);
         // SAFETY: the portable drain dispatches at run time.
-        unsafe { self.pipeline.advance::<PORTABLE>(table, &codes, solid & lanes, mask) };
+        unsafe { self.pipeline.advance::<false>(table, &codes, solid & lanes, mask) };
     }
 
     /// Rasterizes everything queued into `mask` and empties the batch and the pipeline.
@@ -508,7 +489,7 @@ impl TriangleBatch {
         let solid = edge_codes(table, &self.corners, &mut codes);
         let queued = (1u32 << self.len) - 1;
         // SAFETY: the portable drain dispatches at run time.
-        unsafe { self.pipeline.advance::<PORTABLE>(table, &codes, solid & queued, mask) };
+        unsafe { self.pipeline.advance::<false>(table, &codes, solid & queued, mask) };
         self.len = 0;
     }
 }

@@ -85,26 +85,28 @@ impl PlaneTable {
 
 #[cfg(target_arch = "x86_64")]
 impl PlaneTable {
-    /// `or_triangles_avx512_inlined` as a function of its own (the tests').
+    /// `or_triangles_avx2` in 512-bit registers (the AVX-512 kernel's drain, as the tests call
+    /// it).
     ///
     /// # Safety
     /// The CPU must support AVX-512F.
     #[cfg(test)]
     #[target_feature(enable = "avx512f")]
-    unsafe fn or_triangles_avx512(&self, fetches: &Fetches, lanes: u32, mask: &mut Mask) {
-        self.or_triangles_avx512_inlined(fetches, lanes, mask)
+    unsafe fn or_triangles_avx512<const N: usize>(&self, fetches: &Fetches<N>, lanes: u32, mask: &mut Mask) {
+        let mut acc = [_mm512_setzero_si512(); 2];
+        self.accumulate_avx512(fetches, lanes, &mut acc);
+        self.finish_avx512(acc, mask);
     }
 
-    /// `or_triangles_avx2_inlined` in 512-bit registers, for kernels compiled for AVX-512F,
-    /// into which it inlines.
+    /// ORs into `acc` (a mask in two 512-bit words, not yet AND-ed with the disk) the
+    /// triangles of the `lanes` of `fetches`, for kernels compiled for AVX-512F, into which it
+    /// inlines. The kernel keeps `acc` in registers across its packets (`finish_avx512`).
     ///
     /// # Safety
     /// The CPU must support AVX-512F.
     #[inline(always)]
-    pub(crate) unsafe fn or_triangles_avx512_inlined(&self, fetches: &Fetches, lanes: u32, mask: &mut Mask) {
-        const WORDS: usize = MASK_BYTES / 64;
+    pub(crate) unsafe fn accumulate_avx512<const N: usize>(&self, fetches: &Fetches<N>, lanes: u32, acc: &mut [__m512i; 2]) {
         let base = self.masks.as_ptr() as *const u8;
-        let mut acc = [_mm512_setzero_si512(); WORDS];
         let mut bits = lanes;
         while bits != 0 {
             let i = bits.trailing_zeros() as usize;
@@ -114,13 +116,21 @@ impl PlaneTable {
             let (fa, fb, fc) = (_mm512_set1_epi32(fetches.flips[0][i]), _mm512_set1_epi32(fetches.flips[1][i]), _mm512_set1_epi32(fetches.flips[2][i]));
             for (w, acc) in acc.iter_mut().enumerate() {
                 let x = _mm512_xor_si512(_mm512_load_si512(a.add(w)), fa);
-                // x & (fb ^ b): ternary-logic table 0x60 for (a, b, c) = (x, fb, b).
+                // x & (fb ^ b): ternary-logic table 0x60 for (x, fb, b).
                 let t = _mm512_ternarylogic_epi32::<0x60>(x, fb, _mm512_load_si512(b.add(w)));
                 let u = _mm512_xor_si512(_mm512_load_si512(c.add(w)), fc);
                 // acc | (t & u): table 0xF8.
                 *acc = _mm512_ternarylogic_epi32::<0xF8>(*acc, t, u);
             }
         }
+    }
+
+    /// ORs `acc` (`accumulate_avx512`), AND-ed with the disk, into `mask`.
+    ///
+    /// # Safety
+    /// The CPU must support AVX-512F.
+    #[inline(always)]
+    pub(crate) unsafe fn finish_avx512(&self, acc: [__m512i; 2], mask: &mut Mask) {
         let (disk, out) = (self.disk().0.as_ptr() as *const __m512i, mask.0.as_mut_ptr() as *mut __m512i);
         for (w, acc) in acc.into_iter().enumerate() {
             // out | (acc & disk): table 0xF8.

@@ -11,7 +11,7 @@ use crate::disk_mask::Mask;
 use crate::packets::{Packet, LANES};
 use crate::plane_table::PlaneTable;
 
-use super::{LocalCorners, Pipeline, Viewer, AVX2, FLAT_CONE_SQUARED, LOW_BAND_Z};
+use super::{LocalCorners, Pipeline, Viewer, FLAT_CONE_SQUARED, LOW_BAND_Z};
 
 type V3 = [__m256; 3];
 
@@ -58,7 +58,7 @@ unsafe fn is_vertex(packet: &Packet, k: usize, exclude: __m256i) -> __m256i {
 pub(super) unsafe fn rasterize_batch(pipeline: &mut Pipeline, table: &PlaneTable, viewer: &Viewer, batch: &[(&Packet, u32)], mask: &mut Mask) -> u32 {
     let mut drawn = 0;
     for &(packet, lanes) in batch {
-        drawn += pipeline.rasterize_viewed::<AVX2>(table, viewer, packet, lanes, mask);
+        drawn += pipeline.rasterize_viewed::<true>(table, viewer, packet, lanes, mask);
     }
     drawn
 }

@@ -1,21 +1,26 @@
 //! `Pipeline::rasterize_batch` for CPUs with AVX-512: the packets' arithmetic two packets at a
-//! time in 512-bit registers (sixteen lanes), and the drain with two 512-bit words per mask
-//! and ternary logic (`PlaneTable::or_triangles_avx512_inlined`). The same operations lane by
-//! lane as the portable and AVX2 paths (multiplies and adds, never fused; `max` and `min`
-//! with the bound second), so the codes, lanes and masks are the same bit for bit.
+//! time in 512-bit registers (sixteen lanes), and the masks OR-ed as two 512-bit words with
+//! ternary logic (`PlaneTable::accumulate_avx512`), kept in registers over the whole batch.
+//! The same operations lane by lane as the portable and AVX2 paths (multiplies and adds,
+//! never fused; `max` and `min` with the bound second), so the codes, lanes and masks are the
+//! same bit for bit.
+//!
+//! Like the `Pipeline`, the kernel ORs a pair's masks only once the next pair's codes are
+//! known, but it does not prefetch them: on an AMD EPYC with Zen 5, the prefetches took 15 %
+//! longer solves and saved nothing, even in the AVX2 kernel (docs/solver_speed.md).
 
 use std::arch::x86_64::*;
 
 use crate::disk_mask::Mask;
 use crate::packets::{Packet, LANES};
-use crate::plane_table::PlaneTable;
+use crate::plane_table::{Fetches, PlaneTable};
 
-use super::{Pipeline, Viewer, FLAT_CONE_SQUARED, LOW_BAND_Z};
+use super::{Viewer, FLAT_CONE_SQUARED, LOW_BAND_Z};
 
 type V3 = [__m512; 3];
 
-/// Codes of two packets, `[packet][edge][lane]`.
-type PairCodes = [[[u32; LANES]; 3]; 2];
+/// Two packets' lanes.
+const WIDE: usize = 2 * LANES;
 
 #[inline(always)]
 unsafe fn dot(a: V3, b: V3) -> __m512 {
@@ -59,10 +64,14 @@ unsafe fn is_vertex([p, q]: [&Packet; 2], k: usize, exclude: __m512i) -> __mmask
     _mm512_cmpeq_epi32_mask(ids, exclude)
 }
 
-/// `rasterize_batch` with the packets' arithmetic done two packets at a time; an odd last
-/// packet is paired with itself, its second copy drawing no lane.
+/// `rasterize_batch` with the packets' arithmetic done two packets at a time (an odd last
+/// packet is paired with itself, its copy drawing no lane), and the masks of a pair OR-ed
+/// while the next pair's codes are computed.
 #[target_feature(enable = "avx2,avx512f,avx512vl,avx512bw,avx512dq")]
-pub(super) unsafe fn rasterize_batch(pipeline: &mut Pipeline, table: &PlaneTable, viewer: &Viewer, batch: &[(&Packet, u32)], mask: &mut Mask) -> u32 {
+pub(super) unsafe fn rasterize_batch(table: &PlaneTable, viewer: &Viewer, batch: &[(&Packet, u32)], mask: &mut Mask) -> u32 {
+    let mut fetches = [Fetches::<WIDE>::default(); 2];
+    let (mut pending, mut pending_lanes) = (0, 0);
+    let mut acc = [_mm512_setzero_si512(); 2];
     let mut drawn = 0;
     for two in batch.chunks(2) {
         let (p, p_lanes) = two[0];
@@ -73,20 +82,16 @@ pub(super) unsafe fn rasterize_batch(pipeline: &mut Pipeline, table: &PlaneTable
             continue;
         }
         drawn += keep.count_ones();
-        let mut codes = PairCodes::default();
-        let solid = solid_codes(table, corners, &mut codes);
-        for (h, codes) in codes.iter().enumerate() {
-            let lanes = (keep as u32 & solid) >> (LANES * h) & 0xff;
-            if lanes != 0 {
-                pipeline.advance::<AVX512>(table, codes, lanes, mask);
-            }
-        }
+        let (codes, solid) = solid_codes(table, corners);
+        let next = 1 - pending;
+        fetches[next] = table.fetches_avx512(codes);
+        table.accumulate_avx512(&fetches[pending], pending_lanes, &mut acc);
+        (pending, pending_lanes) = (next, keep as u32 & solid);
     }
+    table.accumulate_avx512(&fetches[pending], pending_lanes, &mut acc);
+    table.finish_avx512(acc, mask);
     drawn
 }
-
-/// The kernel level of `Pipeline::advance` for this module.
-const AVX512: u8 = super::AVX512;
 
 /// Both packets' corners in the receiver's frame, and the bits of the lanes to draw
 /// (`avx2::packet_codes_inlined`'s tests; packet `q` in bits 8 to 15).
@@ -113,10 +118,10 @@ unsafe fn below_low_band([pa, pb, pc]: [V3; 3]) -> __mmask16 {
     _mm512_cmp_ps_mask::<_CMP_GT_OQ>(near, _mm512_setzero_ps()) & _mm512_cmp_ps_mask::<_CMP_LT_OQ>(height, bound)
 }
 
-/// The codes of the three edge planes of every lane into `codes`, and the bits of the lanes
+/// The codes of the three edge planes of every lane (`[edge]`), and the bits of the lanes
 /// whose cone has a solid angle (`avx2::solid_codes`).
 #[inline(always)]
-unsafe fn solid_codes(table: &PlaneTable, [pa, pb, pc]: [V3; 3], codes: &mut PairCodes) -> u32 {
+unsafe fn solid_codes(table: &PlaneTable, [pa, pb, pc]: [V3; 3]) -> ([__m512i; 3], u32) {
     let (ab, bc, ca) = (cross(pa, pb), cross(pb, pc), cross(pc, pa));
     let det = dot(ab, pc);
     let scale = _mm512_mul_ps(_mm512_mul_ps(dot(pa, pa), dot(pb, pb)), dot(pc, pc));
@@ -124,27 +129,29 @@ unsafe fn solid_codes(table: &PlaneTable, [pa, pb, pc]: [V3; 3], codes: &mut Pai
     // Orient the edge planes so that the opposite vertex is on their positive side.
     let negative = _mm512_cmp_ps_mask::<_CMP_LT_OQ>(det, _mm512_setzero_ps());
     let flip = _mm512_castsi512_ps(_mm512_maskz_mov_epi32(negative, _mm512_set1_epi32(i32::MIN)));
-    for (e, [x, y, z]) in [ab, bc, ca].into_iter().enumerate() {
-        let code = table.codes_avx512(_mm512_xor_ps(x, flip), _mm512_xor_ps(y, flip), _mm512_xor_ps(z, flip));
-        _mm256_storeu_si256(codes[0][e].as_mut_ptr() as *mut __m256i, _mm512_castsi512_si256(code));
-        _mm256_storeu_si256(codes[1][e].as_mut_ptr() as *mut __m256i, _mm512_extracti32x8_epi32::<1>(code));
-    }
-    solid as u32
+    let codes = [ab, bc, ca].map(|[x, y, z]| table.codes_avx512(_mm512_xor_ps(x, flip), _mm512_xor_ps(y, flip), _mm512_xor_ps(z, flip)));
+    (codes, solid as u32)
 }
 
 #[cfg(test)]
 mod tests {
     use super::super::avx2::tests::Corners;
-    use super::super::{avx2, has_avx512, packet_codes_portable};
+    use super::super::{avx2, has_avx512, packet_codes_portable, Pipeline};
     use super::*;
 
-    /// `kept_corners` and `solid_codes` for a pair of packets, in a function compiled for them.
+    /// `kept_corners` and `solid_codes` for a pair of packets, in a function compiled for them:
+    /// the lanes to draw, the solid ones, and the codes `[packet][edge][lane]`.
     #[target_feature(enable = "avx2,avx512f,avx512vl,avx512bw,avx512dq")]
-    unsafe fn pair_codes(table: &PlaneTable, viewer: &Viewer, packets: [&Packet; 2], lanes: u32) -> (u32, u32, PairCodes) {
+    unsafe fn pair_codes(table: &PlaneTable, viewer: &Viewer, packets: [&Packet; 2], lanes: u32) -> (u32, u32, [[[u32; LANES]; 3]; 2]) {
         let (corners, keep) = kept_corners(viewer, packets, lanes);
-        let mut codes = PairCodes::default();
-        let solid = solid_codes(table, corners, &mut codes);
-        (keep as u32, solid, codes)
+        let (codes, solid) = solid_codes(table, corners);
+        let mut out = [[[0; LANES]; 3]; 2];
+        for (e, code) in codes.into_iter().enumerate() {
+            let mut wide = [0u32; WIDE];
+            _mm512_storeu_si512(wide.as_mut_ptr() as *mut __m512i, code);
+            (out[0][e], out[1][e]) = (wide[..LANES].try_into().unwrap(), wide[LANES..].try_into().unwrap());
+        }
+        (keep as u32, solid, out)
     }
 
     #[test]
@@ -188,16 +195,15 @@ mod tests {
                 let batch: Vec<(&Packet, u32)> = packets.iter().map(|p| (p, crate::test_random::xorshift32(&mut rng.0) & 0xff)).collect();
                 let (frame, origin) = rng.frame();
                 let viewer = Viewer { origin, frame: &frame, exclude: rng.0 % 64 };
-                let draw = |wide: bool| {
-                    let (mut pipeline, mut mask) = (Pipeline::default(), Mask::EMPTY);
-                    // SAFETY: the CPU supports AVX2 and AVX-512 (checked above).
-                    let drawn = unsafe {
-                        if wide { rasterize_batch(&mut pipeline, &table, &viewer, &batch, &mut mask) } else { avx2::rasterize_batch(&mut pipeline, &table, &viewer, &batch, &mut mask) }
-                    };
-                    pipeline.drain(&table, &mut mask);
-                    (drawn, mask)
-                };
-                assert_eq!(draw(true), draw(false), "resolution {resolution}, round {round}, {} packets", batch.len());
+                let start = if round % 4 == 0 { Mask::EMPTY } else { table.mask_at(rng.0 % (6 * resolution * resolution) as u32) };
+                let mut wide = start;
+                // SAFETY: the CPU supports AVX2 and AVX-512 (checked above).
+                let wide_drawn = unsafe { rasterize_batch(&table, &viewer, &batch, &mut wide) };
+                let (mut pipeline, mut narrow) = (Pipeline::default(), start);
+                // SAFETY: as above.
+                let narrow_drawn = unsafe { avx2::rasterize_batch(&mut pipeline, &table, &viewer, &batch, &mut narrow) };
+                pipeline.drain(&table, &mut narrow);
+                assert_eq!((wide_drawn, wide), (narrow_drawn, narrow), "resolution {resolution}, round {round}, {} packets", batch.len());
             }
         }
     }
